@@ -1,0 +1,1 @@
+//! Photo sets: manifest, cameras, lights, images, importers.
