@@ -1,8 +1,16 @@
 //! bouncefit: fit single- and multi-bounce microfacet materials to photographs of flat samples.
 //!
 //! Data flows one way: capture manifest -> shading records -> render -> loss -> optimiser ->
-//! fit file -> report / export.
+//! fit file -> report / export. Where things live:
+//!
+//! - [`scalar`]: the scalar trait (f64, f32, dual numbers) and small vector types;
+//! - [`microfacet`]: distributions, Lambda, masking, visible normals, Fresnel;
+//! - [`bsdf`]: the BRDF trait and one file per model;
+//! - [`capture`], [`shading`]: photo sets and the per-pixel records computed from them.
 
+pub mod bsdf;
 pub mod capture;
 pub mod error;
+pub mod microfacet;
+pub mod scalar;
 pub mod shading;

@@ -1,0 +1,97 @@
+//! BRDF models: the common interface, the model names of the command line, and one file per model.
+//!
+//! Every model is a reflection-only BRDF of a flat sample in the local frame (`z` = normal,
+//! `wi` toward the light, `wo` toward the camera; PHYSICS.md "Conventions"). Values are `f` in
+//! 1/sr, split into the exact single-bounce part and the part carried by paths of two or more
+//! bounces, so that stochastic models spend samples only where they are needed.
+//!
+//! | model | file | kind |
+//! | --- | --- | --- |
+//! | `single` | [`single`] | analytic, Walter et al. 2007 |
+
+pub mod single;
+
+use crate::scalar::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// The random number generator every stochastic estimator draws from (deterministic per seed).
+pub type Rng = rand_pcg::Pcg64Mcg;
+
+/// A BRDF value split by path length.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BrdfValue {
+    /// Exact single-bounce part, 1/sr.
+    pub single: [f64; 3],
+    /// Paths of two or more bounces (an estimate for stochastic models), 1/sr.
+    pub multi: [f64; 3],
+}
+
+impl BrdfValue {
+    pub fn total(&self) -> [f64; 3] {
+        [0, 1, 2].map(|c| self.single[c] + self.multi[c])
+    }
+}
+
+/// An outgoing direction drawn by a model's sampler.
+#[derive(Clone, Copy, Debug)]
+pub struct BrdfSample {
+    pub wo: Vec3<f64>,
+    /// `f(wi, wo) * wo.z / pdf(wo)` per channel (for stochastic models an unbiased estimate).
+    pub weight: [f64; 3],
+    /// Density of `wo` in solid angle (1/sr).
+    pub pdf: f64,
+}
+
+/// The interface every model implements.
+pub trait Brdf: Send + Sync {
+    /// `f(wi, wo)` in 1/sr for unit directions above the surface; zero below it. Stochastic
+    /// models draw their random numbers from `rng`, analytic models ignore it.
+    fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue;
+
+    /// Draw `wo` given `wi`. The first two uniform numbers come from `u` (so a caller can
+    /// stratify or integrate over them), any further ones from `rng`. `None` when the sampled
+    /// path leaves below the horizon or is absorbed.
+    fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample>;
+
+    /// Density in solid angle with which [`Brdf::sample`] returns `wo`.
+    fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64;
+
+    /// Whether `eval` is a Monte Carlo estimate.
+    fn is_stochastic(&self) -> bool {
+        false
+    }
+}
+
+/// The models the command line accepts (PHYSICS.md "Multi-bounce models").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Model {
+    /// Walter et al. 2007: analytic, loses the energy of multiple bounces.
+    Single,
+}
+
+impl Model {
+    pub const ALL: [Model; 1] = [Model::Single];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Single => "single",
+        }
+    }
+}
+
+impl std::str::FromStr for Model {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Model::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            let names: Vec<_> = Model::ALL.iter().map(|m| m.name()).collect();
+            format!("unknown model '{s}' (known: {})", names.join(", "))
+        })
+    }
+}
+
+impl std::fmt::Display for Model {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}

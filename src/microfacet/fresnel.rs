@@ -1,0 +1,163 @@
+//! Fresnel reflectance at a microfacet, per RGB channel.
+//!
+//! | kind | parameters | formula |
+//! | --- | --- | --- |
+//! | `White` | none | `F = 1` (furnace tests) |
+//! | `Schlick` | `f0` in [0, 1] per channel | `F0 + (1 - F0)(1 - cos)^5` (Schlick 1994) |
+//! | `Conductor` | complex IOR `eta + i k` per channel, relative to the outside medium | exact unpolarised reflectance of a conductor (Born & Wolf sec. 13.4; the same quantity as pbrt-v4 `FrComplex`), written in real arithmetic so it is generic over the scalar type |
+//! | `Dielectric` | real relative IOR `eta` | exact unpolarised reflectance with total internal reflection for `eta < 1` |
+//!
+//! The conductor form: with `c = cos(theta_i)`, `a^2 + b^2 = sqrt((eta^2 - k^2 - sin^2)^2 + 4 eta^2 k^2)`
+//! and `a = sqrt((a^2 + b^2 + eta^2 - k^2 - sin^2) / 2)`,
+//! `Rs = (a^2 + b^2 + c^2 - 2 a c) / (a^2 + b^2 + c^2 + 2 a c)` and
+//! `Rp = Rs (c^2 (a^2 + b^2) + sin^4 - 2 a c sin^2) / (c^2 (a^2 + b^2) + sin^4 + 2 a c sin^2)`.
+
+use crate::scalar::{Real, Rgb};
+
+/// Fresnel model of the microfacets.
+#[derive(Clone, Copy, Debug)]
+pub enum Fresnel<T> {
+    White,
+    Schlick { f0: Rgb<T> },
+    Conductor { eta: Rgb<T>, k: Rgb<T> },
+    Dielectric { eta: T },
+}
+
+impl<T: Real> Fresnel<T> {
+    /// Reflectance for the cosine between the incident direction and the microfacet normal.
+    #[inline]
+    pub fn eval(&self, cos_theta: T) -> Rgb<T> {
+        let c = cos_theta.max_c(0.0).min_c(1.0);
+        match *self {
+            Fresnel::White => Rgb::splat(T::one()),
+            Fresnel::Schlick { f0 } => {
+                let m = T::one() - c;
+                let m5 = m.sq().sq() * m;
+                f0.map(|f| f + (T::one() - f) * m5)
+            }
+            Fresnel::Conductor { eta, k } => eta.zip(k, |e, kk| conductor(c, e, kk)),
+            Fresnel::Dielectric { eta } => Rgb::splat(dielectric(c, eta)),
+        }
+    }
+
+    /// Reflectance at normal incidence.
+    pub fn f0(&self) -> Rgb<T> {
+        self.eval(T::one())
+    }
+}
+
+/// Exact unpolarised reflectance of a conductor with complex index `eta + i k`.
+#[inline]
+pub fn conductor<T: Real>(c: T, eta: T, k: T) -> T {
+    let c2 = c * c;
+    let s2 = T::one() - c2;
+    let eta2 = eta * eta;
+    let k2 = k * k;
+    let t0 = eta2 - k2 - s2;
+    let a2pb2 = (t0 * t0 + T::c(4.0) * eta2 * k2).sqrt();
+    let a = ((a2pb2 + t0) * T::c(0.5)).max_c(0.0).sqrt();
+    let t1 = a2pb2 + c2;
+    let t2 = T::c(2.0) * c * a;
+    let rs = (t1 - t2) / (t1 + t2);
+    let t3 = c2 * a2pb2 + s2 * s2;
+    let t4 = t2 * s2;
+    let rp = rs * (t3 - t4) / (t3 + t4);
+    (rs + rp) * T::c(0.5)
+}
+
+/// Exact unpolarised reflectance of a dielectric interface with relative index `eta`
+/// (transmitted over incident medium); 1 under total internal reflection.
+#[inline]
+pub fn dielectric<T: Real>(c: T, eta: T) -> T {
+    let cos_t2 = T::one() - (T::one() - c * c) / (eta * eta);
+    if cos_t2.re64() <= 0.0 {
+        return T::one();
+    }
+    let cos_t = cos_t2.sqrt();
+    let rs = (c - eta * cos_t) / (c + eta * cos_t);
+    let rp = (eta * c - cos_t) / (eta * c + cos_t);
+    (rs * rs + rp * rp) * T::c(0.5)
+}
+
+/// Normal-incidence reflectance of a conductor, `((eta-1)^2 + k^2) / ((eta+1)^2 + k^2)`.
+pub fn conductor_f0(eta: f64, k: f64) -> f64 {
+    ((eta - 1.0).powi(2) + k * k) / ((eta + 1.0).powi(2) + k * k)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Reference reflectance through complex arithmetic on the amplitude coefficients
+    /// (`cos_t = sqrt(1 - sin^2 / n^2)` with complex `n`): an independent derivation.
+    fn conductor_complex(c: f64, eta: f64, k: f64) -> f64 {
+        type C = (f64, f64);
+        let mul = |a: C, b: C| (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0);
+        let div = |a: C, b: C| {
+            let d = b.0 * b.0 + b.1 * b.1;
+            ((a.0 * b.0 + a.1 * b.1) / d, (a.1 * b.0 - a.0 * b.1) / d)
+        };
+        let sqrt = |a: C| {
+            let r = (a.0 * a.0 + a.1 * a.1).sqrt().sqrt();
+            let t = a.1.atan2(a.0) / 2.0;
+            (r * t.cos(), r * t.sin())
+        };
+        let n = (eta, k);
+        let s2 = 1.0 - c * c;
+        let sin2_t = div((s2, 0.0), mul(n, n));
+        let cos_t = sqrt((1.0 - sin2_t.0, -sin2_t.1));
+        let ci = (c, 0.0);
+        let n_ci = mul(n, ci);
+        let n_ct = mul(n, cos_t);
+        let r_parl = div((n_ci.0 - cos_t.0, n_ci.1 - cos_t.1), (n_ci.0 + cos_t.0, n_ci.1 + cos_t.1));
+        let r_perp = div((ci.0 - n_ct.0, ci.1 - n_ct.1), (ci.0 + n_ct.0, ci.1 + n_ct.1));
+        let norm = |a: C| a.0 * a.0 + a.1 * a.1;
+        0.5 * (norm(r_parl) + norm(r_perp))
+    }
+
+    #[test]
+    fn conductor_matches_complex_amplitudes() {
+        for &(eta, k) in &[(0.2, 3.9), (1.1, 2.1), (0.05, 0.5), (2.5, 0.0), (0.27, 2.78), (9.0, 20.0)] {
+            for i in 0..=20 {
+                let c = (i as f64 / 20.0).max(1e-6);
+                let a = conductor(c, eta, k);
+                let b = conductor_complex(c, eta, k);
+                assert!((a - b).abs() < 1e-12, "eta {eta} k {k} cos {c}: {a} vs {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn normal_incidence_is_f0_and_grazing_tends_to_one() {
+        for &(eta, k) in &[(0.2, 3.9), (1.5, 0.0), (0.27, 2.78), (3.0, 0.1)] {
+            assert!((conductor(1.0, eta, k) - conductor_f0(eta, k)).abs() < 1e-14);
+            assert!(1.0 - conductor(1e-7, eta, k) < 1e-5, "eta {eta} k {k}");
+        }
+        let eta = 1.5f64;
+        assert!((dielectric(1.0, eta) - 0.04).abs() < 1e-14);
+        assert!(1.0 - dielectric(1e-7, eta) < 1e-5);
+        let schlick = Fresnel::Schlick { f0: Rgb([0.9f64, 0.5, 0.1]) };
+        assert_eq!(schlick.eval(1.0).0, [0.9, 0.5, 0.1]);
+        assert!(schlick.eval(0.0).0.iter().all(|&v| (v - 1.0).abs() < 1e-15));
+    }
+
+    #[test]
+    fn dielectric_total_internal_reflection_and_reciprocity_of_indices() {
+        // Inside glass (eta = 1/1.5) beyond the critical angle everything reflects.
+        let crit = (1.0f64 / 1.5).asin();
+        assert_eq!(dielectric((crit + 0.01).cos(), 1.0 / 1.5), 1.0);
+        // Stokes relation: reflectance from either side is equal for refracted angle pairs.
+        let ci: f64 = 0.8;
+        let st = (1.0 - ci * ci).sqrt() / 1.5;
+        let ct = (1.0 - st * st).sqrt();
+        assert!((dielectric(ci, 1.5) - dielectric(ct, 1.0 / 1.5)).abs() < 1e-14);
+    }
+
+    #[test]
+    fn conductor_reduces_to_dielectric_without_absorption() {
+        for i in 1..=10 {
+            let c = i as f64 / 10.0;
+            assert!((conductor(c, 1.5, 0.0) - dielectric(c, 1.5)).abs() < 1e-14);
+        }
+    }
+}
