@@ -8,9 +8,11 @@
 //! - [`bsdf`]: the BRDF trait and one file per model;
 //! - [`capture`], [`shading`]: photo sets and the per-pixel records computed from them.
 
+pub mod albedo;
 pub mod bsdf;
 pub mod capture;
 pub mod error;
+pub mod material;
 pub mod microfacet;
 pub mod scalar;
 pub mod shading;

@@ -10,6 +10,8 @@
 //! | `single` | [`single`] | analytic, Walter et al. 2007 |
 
 pub mod single;
+#[cfg(test)]
+mod tests;
 
 use crate::scalar::Vec3;
 use serde::{Deserialize, Serialize};
