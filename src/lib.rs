@@ -11,8 +11,13 @@
 pub mod albedo;
 pub mod bsdf;
 pub mod capture;
+pub mod commands;
 pub mod error;
+pub mod fit;
+pub mod loss;
 pub mod material;
 pub mod microfacet;
+pub mod progress;
+pub mod render;
 pub mod scalar;
 pub mod shading;

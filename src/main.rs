@@ -1,1 +1,45 @@
-fn main(){}
+//! The `bouncefit` command line: argument parsing and exit codes only; the work is in
+//! `bouncefit::commands`. Bad input exits with status 2 and one line naming the file and field.
+
+use bouncefit::commands;
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(name = "bouncefit", version, about = "Fit single- and multi-bounce microfacet materials to photographs of flat samples")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Evaluate a BRDF at one pair of directions.
+    Brdf(commands::brdf::BrdfArgs),
+    /// Directional albedo of a BRDF at one incidence angle.
+    Albedo(commands::brdf::AlbedoArgs),
+    /// Make a synthetic photo set from a material and a capture manifest.
+    Synth(commands::synth::SynthArgs),
+    /// Re-render a photo set with a material or fit.
+    Render(commands::synth::RenderArgs),
+    /// Fit material parameters to a photo set.
+    Fit(commands::fit::FitArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Brdf(args) => commands::brdf::run_brdf(args),
+        Command::Albedo(args) => commands::brdf::run_albedo(args),
+        Command::Synth(args) => commands::synth::run_synth(args),
+        Command::Render(args) => commands::synth::run_render(args),
+        Command::Fit(args) => commands::fit::run_fit(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -84,9 +84,45 @@ pub fn conductor_f0(eta: f64, k: f64) -> f64 {
     ((eta - 1.0).powi(2) + k * k) / ((eta + 1.0).powi(2) + k * k)
 }
 
+/// Gulbrandsen 2014 ("Artist Friendly Metallic Fresnel", JCGT 3(4), eq. 2-5): the complex index
+/// `(eta, k)` with normal reflectivity `r` in [0, 1) and edge tint `g` in [0, 1].
+/// `eta = g n_min + (1 - g) n_max` with `n_min = (1 - r) / (1 + r)`,
+/// `n_max = (1 + sqrt r) / (1 - sqrt r)`, and `k = sqrt((r (eta + 1)^2 - (eta - 1)^2) / (1 - r))`.
+pub fn ior_from_reflectivity_edge_tint(r: f64, g: f64) -> (f64, f64) {
+    let r = r.clamp(0.0, 1.0 - 1e-12);
+    let g = g.clamp(0.0, 1.0);
+    let n_min = (1.0 - r) / (1.0 + r);
+    let sr = r.sqrt();
+    let n_max = (1.0 + sr) / (1.0 - sr);
+    let eta = g * n_min + (1.0 - g) * n_max;
+    let k2 = (r * (eta + 1.0).powi(2) - (eta - 1.0).powi(2)) / (1.0 - r);
+    (eta, k2.max(0.0).sqrt())
+}
+
+/// Inverse of [`ior_from_reflectivity_edge_tint`]: `r = F0(eta, k)`,
+/// `g = (n_max - eta) / (n_max - n_min)`, clamped to [0, 1] for indices outside the family.
+pub fn reflectivity_edge_tint_from_ior(eta: f64, k: f64) -> (f64, f64) {
+    let r = conductor_f0(eta, k);
+    let n_min = (1.0 - r) / (1.0 + r);
+    let sr = r.sqrt();
+    let n_max = (1.0 + sr) / (1.0 - sr);
+    let g = if n_max > n_min { (n_max - eta) / (n_max - n_min) } else { 0.0 };
+    (r, g.clamp(0.0, 1.0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gulbrandsen_round_trip_and_reflectivity() {
+        for &(eta, k) in &[(0.27, 3.61), (0.68, 2.63), (1.22, 2.29), (1.5, 7.6), (0.14, 3.98)] {
+            let (r, g) = reflectivity_edge_tint_from_ior(eta, k);
+            let (eta2, k2) = ior_from_reflectivity_edge_tint(r, g);
+            assert!((eta - eta2).abs() < 1e-9 && (k - k2).abs() < 1e-9, "{eta},{k} -> {r},{g} -> {eta2},{k2}");
+            assert!((conductor(1.0, eta2, k2) - r).abs() < 1e-12);
+        }
+    }
 
     /// Reference reflectance through complex arithmetic on the amplitude coefficients
     /// (`cos_t = sqrt(1 - sin^2 / n^2)` with complex `n`): an independent derivation.

@@ -1,0 +1,104 @@
+//! `bouncefit brdf` and `bouncefit albedo`: evaluate one model at one configuration.
+
+use super::{parse_direction, MaterialArgs};
+use crate::albedo::{directional_albedo, rng_stream};
+use crate::error::{Error, Result};
+use crate::scalar::Vec3;
+use serde_json::json;
+use std::time::Instant;
+
+#[derive(clap::Args, Debug)]
+pub struct BrdfArgs {
+    #[command(flatten)]
+    pub material: MaterialArgs,
+    /// Direction toward the light, X,Y,Z (normalised by the tool).
+    #[arg(long, allow_hyphen_values = true)]
+    pub wi: String,
+    /// Direction toward the camera, X,Y,Z.
+    #[arg(long, allow_hyphen_values = true)]
+    pub wo: String,
+    /// Monte Carlo samples for stochastic models (analytic models evaluate once).
+    #[arg(long, default_value_t = 4096)]
+    pub samples: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct AlbedoArgs {
+    #[command(flatten)]
+    pub material: MaterialArgs,
+    /// Incidence angle from the normal, degrees, in [0, 90).
+    #[arg(long)]
+    pub theta_i: f64,
+    /// Evaluations (analytic models: a product quadrature of about this many nodes).
+    #[arg(long, default_value_t = 65_536)]
+    pub samples: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Evaluate `f(wi, wo)`; stochastic models average `samples` independent estimates.
+pub fn run_brdf(args: &BrdfArgs) -> Result<()> {
+    let material = args.material.material()?;
+    let wi = parse_direction("--wi", &args.wi)?;
+    let wo = parse_direction("--wo", &args.wo)?;
+    if args.samples == 0 {
+        return Err(Error::argument("--samples", "must be at least 1"));
+    }
+    let brdf = material.brdf();
+    let start = Instant::now();
+    let n = if brdf.is_stochastic() { args.samples } else { 1 };
+    let (mut sum, mut sum2, mut single) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+    let mut rng = rng_stream(args.seed, 0);
+    for _ in 0..n {
+        let v = brdf.eval(wi, wo, &mut rng);
+        single = v.single;
+        for c in 0..3 {
+            sum[c] += v.multi[c];
+            sum2[c] += v.multi[c] * v.multi[c];
+        }
+    }
+    let multi = sum.map(|s| s / n as f64);
+    let stderr = [0, 1, 2].map(|c| if n > 1 { ((sum2[c] / n as f64 - multi[c] * multi[c]).max(0.0) / (n - 1) as f64).sqrt() } else { 0.0 });
+    let f = [0, 1, 2].map(|c| single[c] + multi[c]);
+    let seconds = start.elapsed().as_secs_f64();
+    let out = json!({
+        "model": material.model.name(), "ndf": material.ndf.name(), "height": material.height.name(),
+        "alpha": material.alpha, "wi": wi.re(), "wo": wo.re(),
+        "f": f, "f_cos": f.map(|v| v * wo.z), "f_single": single, "f_multi": multi,
+        "stderr": stderr, "samples": n, "seconds": seconds,
+    });
+    print_result(args.json, &out, || format!("f = {:.6e} {:.6e} {:.6e} 1/sr (single {:.6e} {:.6e} {:.6e}, multi {:.6e} {:.6e} {:.6e} +- {:.1e})", f[0], f[1], f[2], single[0], single[1], single[2], multi[0], multi[1], multi[2], stderr.iter().cloned().fold(0.0, f64::max)));
+    Ok(())
+}
+
+/// Directional albedo at incidence `theta_i`.
+pub fn run_albedo(args: &AlbedoArgs) -> Result<()> {
+    let material = args.material.material()?;
+    if !(0.0..90.0).contains(&args.theta_i) {
+        return Err(Error::argument("--theta-i", format!("{} is outside [0, 90) degrees", args.theta_i)));
+    }
+    let t = args.theta_i.to_radians();
+    let wi = Vec3::new(t.sin(), 0.0, t.cos());
+    let est = directional_albedo(material.brdf().as_ref(), wi, args.samples, args.seed);
+    let out = json!({
+        "model": material.model.name(), "ndf": material.ndf.name(), "alpha": material.alpha,
+        "theta_i_deg": args.theta_i, "albedo": est.value, "stderr": est.stderr, "samples": est.samples,
+    });
+    print_result(args.json, &out, || format!("albedo = {:.6} {:.6} {:.6} (+- {:.1e}, {} samples)", est.value[0], est.value[1], est.value[2], est.stderr.iter().cloned().fold(0.0, f64::max), est.samples));
+    Ok(())
+}
+
+fn print_result(as_json: bool, value: &serde_json::Value, human: impl FnOnce() -> String) {
+    if as_json {
+        println!("{value}");
+    } else {
+        println!("{}", human());
+    }
+}

@@ -1,0 +1,144 @@
+//! `bouncefit fit DIR`: fit one or more models to a photo set and write the fit file plus a
+//! residual image per photo.
+
+use super::images::{display_exposure, write_photo_images};
+use super::output::{check_overwrite, StagedFolder};
+use crate::bsdf::Model;
+use crate::capture::Capture;
+use crate::error::{Error, Result};
+use crate::fit::params::{FresnelFamily, ParamSpace};
+use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
+use crate::loss::LossKind;
+use crate::microfacet::{Height, NdfKind};
+use crate::render::render_all;
+use crate::shading::{ExclusionCounts, ShadingRecords};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args, Debug)]
+pub struct FitArgs {
+    /// Photo set: a folder with capture.toml, a capture.toml, or a MaterialGAN-format folder.
+    pub capture: PathBuf,
+    /// Models to fit, comma-separated; the fit file reports the one with the lowest loss.
+    #[arg(long, value_delimiter = ',', default_value = "single")]
+    pub models: Vec<Model>,
+    #[arg(long, value_enum, default_value = "lbfgs")]
+    pub optimizer: Optimizer,
+    /// Fresnel family to fit.
+    #[arg(long, value_enum, default_value = "schlick")]
+    pub fresnel: FresnelFamily,
+    /// Fit alpha_x and alpha_y separately.
+    #[arg(long)]
+    pub anisotropic: bool,
+    /// Fit a Lambertian diffuse albedo too.
+    #[arg(long)]
+    pub diffuse: bool,
+    #[arg(long, default_value = "ggx")]
+    pub ndf: NdfKind,
+    /// G2 form (Mitsuba 3 uses uncorrelated).
+    #[arg(long, default_value = "correlated")]
+    pub height: Height,
+    #[arg(long, value_enum, default_value = "l2")]
+    pub loss: LossKind,
+    /// Stratified sub-pixel samples per pixel (a perfect square).
+    #[arg(long, default_value_t = 4)]
+    pub pixel_samples: usize,
+    #[arg(long, default_value_t = 200)]
+    pub max_iters: u64,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Fit file to write (default fits/<capture name>.json); residual images go to
+    /// `<fit file without .json>.residuals/`.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Replace an existing fit file.
+    #[arg(long)]
+    pub force: bool,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// One line of the candidates table of a multi-model fit.
+#[derive(Serialize)]
+struct Candidate {
+    model: Model,
+    loss: f64,
+    alpha: [f64; 2],
+    f0: [f64; 3],
+    seconds: f64,
+}
+
+/// The fit file: the best model's material and fit record, and what produced it.
+#[derive(Serialize)]
+struct FitFile<'a> {
+    #[serde(flatten)]
+    best: &'a ModelFit,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    edge_tint: Option<[f64; 3]>,
+    capture: String,
+    capture_name: &'a str,
+    pixel_samples: usize,
+    pixels_used: usize,
+    excluded: ExclusionCounts,
+    seed: u64,
+    version: &'static str,
+    candidates: Vec<Candidate>,
+}
+
+pub fn run_fit(args: &FitArgs) -> Result<()> {
+    let capture = Capture::open(&args.capture)?;
+    super::synth::warn_all(&capture);
+    let output = args.output.clone().unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
+    check_overwrite(&output, args.force)?;
+    let residual_folder = output.with_extension("residuals");
+    let records = ShadingRecords::build(&capture, args.pixel_samples, true)?;
+    let pixels_used = records.weight.iter().filter(|w| **w > 0.0).count();
+    if pixels_used == 0 {
+        return Err(Error::invalid(&args.capture, "photos", "every pixel is excluded (masked, saturated, non-finite or outside the sample)"));
+    }
+    let mut fits = Vec::new();
+    for &model in &args.models {
+        let options = FitOptions {
+            space: ParamSpace { model, ndf: args.ndf, height: args.height, anisotropic: args.anisotropic, fresnel: args.fresnel, diffuse: args.diffuse },
+            optimizer: args.optimizer,
+            loss: args.loss,
+            max_iters: args.max_iters,
+            seed: args.seed,
+            progress: !args.quiet,
+        };
+        let fit = fit_model(&records, &options)?;
+        if !args.quiet {
+            eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
+        }
+        fits.push(fit);
+    }
+    let best = fits.iter().min_by(|a, b| a.loss.total_cmp(&b.loss)).expect("at least one model");
+    let candidates = fits.iter().map(|f| Candidate { model: f.material.model, loss: f.loss, alpha: f.material.alpha, f0: f.f0, seconds: f.seconds }).collect();
+    let file = FitFile {
+        best,
+        edge_tint: edge_tint(&best.material),
+        capture: args.capture.display().to_string(),
+        capture_name: &capture.name,
+        pixel_samples: args.pixel_samples,
+        pixels_used,
+        excluded: records.excluded,
+        seed: args.seed,
+        version: env!("CARGO_PKG_VERSION"),
+        candidates,
+    };
+
+    // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure).
+    let predicted = render_all(&best.material, &records, args.seed);
+    let residual: Vec<[f64; 3]> = predicted.iter().zip(&records.target).zip(&records.weight).map(|((p, t), w)| if *w > 0.0 { [0, 1, 2].map(|c| p[c] - t[c]) } else { [0.0; 3] }).collect();
+    let folder = StagedFolder::new(&residual_folder, true)?;
+    let exposure = display_exposure(&records.target);
+    write_photo_images(&folder.path(""), &records, &residual, exposure, "")?;
+    if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+    }
+    crate::capture::atomic_file::write_atomically(&output, |w| serde_json::to_writer_pretty(&mut *w, &file).map_err(|e| Error::io(&output, e)))?;
+    folder.commit()?;
+    println!("{}", output.display());
+    Ok(())
+}

@@ -1,0 +1,115 @@
+//! `bouncefit synth` (make a photo set from a material and a capture) and `bouncefit render`
+//! (re-render a photo set with a material or fit).
+
+use super::images::{display_exposure, write_photo_images};
+use super::output::StagedFolder;
+use crate::albedo::rng_stream;
+use crate::capture::image_io::ColorEncoding;
+use crate::capture::Capture;
+use crate::error::{Error, Result};
+use crate::material::Material;
+use crate::render::render_all;
+use crate::shading::ShadingRecords;
+use rand_distr::{Distribution, StandardNormal};
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct SynthArgs {
+    /// Material file (JSON) of the sample.
+    #[arg(long)]
+    pub material: PathBuf,
+    /// Capture manifest (capture.toml) giving cameras, lights and image names; images need not exist.
+    #[arg(long)]
+    pub capture: PathBuf,
+    /// Output folder: one EXR (linear) and PNG (tone-mapped) per photo, capture.toml, material.json.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Relative Gaussian noise: each channel becomes v (1 + SIGMA n), n ~ N(0, 1).
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f64,
+    /// Stratified sub-pixel samples per pixel (a perfect square).
+    #[arg(long, default_value_t = 4)]
+    pub pixel_samples: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Replace a non-empty output folder.
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// Photo set (folder with capture.toml, a capture.toml, or a MaterialGAN-format folder).
+    #[arg(long)]
+    pub capture: PathBuf,
+    /// Material or fit file.
+    #[arg(long)]
+    pub material: PathBuf,
+    /// Output folder: `<photo image stem>.exr` and `.png` per photo.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[arg(long, default_value_t = 4)]
+    pub pixel_samples: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long)]
+    pub force: bool,
+}
+
+pub fn run_synth(args: &SynthArgs) -> Result<()> {
+    if !(args.noise.is_finite() && args.noise >= 0.0) {
+        return Err(Error::argument("--noise", format!("must be a finite number >= 0, got {}", args.noise)));
+    }
+    let material = Material::load(&args.material)?;
+    let capture = Capture::open(&args.capture)?;
+    warn_all(&capture);
+    let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
+    let mut pixels = render_all(&material, &records, args.seed);
+    if args.noise > 0.0 {
+        for (p, v) in pixels.iter_mut().enumerate() {
+            let mut rng = rng_stream(args.seed ^ 0x6E6F_6973_6500_0000, p as u64);
+            for c in v.iter_mut() {
+                let n: f64 = StandardNormal.sample(&mut rng);
+                *c = (*c * (1.0 + args.noise * n)).max(0.0);
+            }
+        }
+    }
+    let folder = StagedFolder::new(&args.output, args.force)?;
+    let staging_root = folder.path("");
+    write_photo_images(&staging_root, &records, &pixels, display_exposure(&pixels), "")?;
+    let mut synthetic = capture.clone();
+    synthetic.root = staging_root.clone();
+    for photo in &mut synthetic.photos {
+        photo.image = PathBuf::from(format!("{}.exr", photo.stem()));
+        photo.color = ColorEncoding::Linear;
+        photo.mask = None;
+        photo.saturated_mask = None;
+    }
+    synthetic.save_manifest(&folder.path("capture.toml"))?;
+    crate::capture::atomic_file::write_atomically(&folder.path("material.json"), |w| {
+        serde_json::to_writer_pretty(&mut *w, &material).map_err(|e| Error::io(args.output.join("material.json"), e))
+    })?;
+    folder.commit()?;
+    eprintln!("wrote {} photos of {}x{} to {}", records.photos.len(), records.photos[0].width, records.photos[0].height, args.output.display());
+    Ok(())
+}
+
+pub fn run_render(args: &RenderArgs) -> Result<()> {
+    let material = Material::load(&args.material)?;
+    let capture = Capture::open(&args.capture)?;
+    warn_all(&capture);
+    let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
+    let pixels = render_all(&material, &records, args.seed);
+    let folder = StagedFolder::new(&args.output, args.force)?;
+    write_photo_images(&folder.path(""), &records, &pixels, display_exposure(&pixels), "")?;
+    folder.commit()?;
+    eprintln!("rendered {} photos to {}", records.photos.len(), args.output.display());
+    Ok(())
+}
+
+/// Print a capture's warnings (unknown keys and the like) on stderr.
+pub fn warn_all(capture: &Capture) {
+    for w in &capture.warnings {
+        eprintln!("warning: {w}");
+    }
+}

@@ -1,0 +1,80 @@
+//! Image losses on linear radiance, over the weighted pixels of a photo set.
+//!
+//! | loss | per pixel and channel | use |
+//! | --- | --- | --- |
+//! | `l2` | `(p - t)^2` | Gaussian noise of constant level; the default |
+//! | `log-l1` | `|ln(1 + p/s) - ln(1 + t/s)|`, `s` = mean target radiance | highlights and dark regions on an equal footing (robust to outliers) |
+//!
+//! Both are weighted means (`sum w loss / (3 sum w)`), so their values compare across photo sets
+//! of different sizes.
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum LossKind {
+    #[default]
+    L2,
+    LogL1,
+}
+
+/// A loss bound to the targets and weights of the pixels it compares.
+pub struct Loss<'a> {
+    pub kind: LossKind,
+    pub target: &'a [[f64; 3]],
+    pub weight: &'a [f64],
+    /// Radiance scale of `log-l1` (mean target radiance).
+    scale: f64,
+}
+
+impl<'a> Loss<'a> {
+    pub fn new(kind: LossKind, target: &'a [[f64; 3]], weight: &'a [f64]) -> Self {
+        let wsum: f64 = weight.iter().sum();
+        let mean = target.iter().zip(weight).map(|(t, w)| w * (t[0] + t[1] + t[2]) / 3.0).sum::<f64>() / wsum.max(f64::MIN_POSITIVE);
+        Loss { kind, target, weight, scale: mean.max(1e-12) }
+    }
+
+    /// Per-pixel loss of one prediction (summed over channels, unweighted).
+    pub fn pixel(&self, predicted: [f64; 3], index: usize) -> f64 {
+        let t = self.target[index];
+        (0..3)
+            .map(|c| match self.kind {
+                LossKind::L2 => (predicted[c] - t[c]).powi(2),
+                LossKind::LogL1 => ((predicted[c] / self.scale).ln_1p() - (t[c].max(0.0) / self.scale).ln_1p()).abs(),
+            })
+            .sum()
+    }
+
+    /// Weighted mean loss of a full prediction (same length as the targets).
+    pub fn value(&self, predicted: &[[f64; 3]]) -> f64 {
+        let (mut sum, mut wsum) = (0.0, 0.0);
+        for (i, (p, w)) in predicted.iter().zip(self.weight).enumerate() {
+            if *w > 0.0 {
+                sum += w * self.pixel(*p, i);
+                wsum += w;
+            }
+        }
+        sum / (3.0 * wsum.max(f64::MIN_POSITIVE))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn losses_vanish_at_the_target_and_grow_away_from_it() {
+        let target = vec![[0.5, 1.0, 2.0], [0.1, 0.2, 0.3]];
+        let weight = vec![1.0, 1.0];
+        for kind in [LossKind::L2, LossKind::LogL1] {
+            let loss = Loss::new(kind, &target, &weight);
+            assert_eq!(loss.value(&target), 0.0);
+            let near: Vec<_> = target.iter().map(|t| t.map(|v| v * 1.01)).collect();
+            let far: Vec<_> = target.iter().map(|t| t.map(|v| v * 1.5)).collect();
+            assert!(loss.value(&near) > 0.0 && loss.value(&near) < loss.value(&far));
+        }
+        // Zero-weight pixels do not count.
+        let loss = Loss::new(LossKind::L2, &target, &[1.0, 0.0]);
+        assert_eq!(loss.value(&[target[0], [9.0; 3]]), 0.0);
+    }
+}
