@@ -30,7 +30,9 @@ pub fn write_atomically(
         let mut writer = BufWriter::new(file);
         write(&mut writer)?;
         writer.flush().map_err(|e| Error::io(path, e))?;
-        let file = writer.into_inner().map_err(|e| Error::io(path, e.error()))?;
+        let file = writer
+            .into_inner()
+            .map_err(|e| Error::io(path, e.error()))?;
         file.sync_all().map_err(|e| Error::io(path, e))?;
         fs::rename(&temporary, path).map_err(|e| Error::io(path, e))
     })();
@@ -51,7 +53,11 @@ fn temporary_path(path: &Path) -> Result<PathBuf> {
         _ => Path::new("."),
     };
     let n = NEXT_TEMPORARY.fetch_add(1, Ordering::Relaxed);
-    Ok(folder.join(format!(".{}.{}-{n}.tmp", name.to_string_lossy(), std::process::id())))
+    Ok(folder.join(format!(
+        ".{}.{}-{n}.tmp",
+        name.to_string_lossy(),
+        std::process::id()
+    )))
 }
 
 #[cfg(test)]
@@ -72,7 +78,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("out.txt");
         fs::write(&path, "old").unwrap();
-        write_atomically(&path, |w| w.write_all(b"new").map_err(|e| Error::io("x", e))).unwrap();
+        write_atomically(&path, |w| {
+            w.write_all(b"new").map_err(|e| Error::io("x", e))
+        })
+        .unwrap();
         assert_eq!(fs::read_to_string(&path).unwrap(), "new");
         assert_eq!(folder_entries(dir.path()), vec!["out.txt"]);
     }

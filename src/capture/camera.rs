@@ -34,11 +34,13 @@ pub struct Pinhole {
     /// Any vector not parallel to the viewing direction; the image's "up" is its component
     /// orthogonal to the viewing direction.
     pub up: DVec3,
-    /// Focal lengths in pixels.
+    /// Horizontal focal length in pixels.
     pub fx: f64,
+    /// Vertical focal length in pixels.
     pub fy: f64,
-    /// Principal point in pixel coordinates (default: the image centre).
+    /// Principal point, x pixel coordinate (default: width / 2).
     pub cx: f64,
+    /// Principal point, y pixel coordinate (default: height / 2).
     pub cy: f64,
     /// `[width, height]` in pixels.
     pub resolution: [usize; 2],
@@ -59,8 +61,11 @@ pub struct Rectified {
 /// `right`, `-up`, `forward`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
+    /// Viewing direction (OpenCV camera +z).
     pub forward: DVec3,
+    /// Image right (OpenCV camera +x).
     pub right: DVec3,
+    /// Image up (OpenCV camera -y).
     pub up: DVec3,
 }
 
@@ -104,10 +109,25 @@ impl Camera {
 impl Pinhole {
     /// A pinhole camera from a vertical field of view in degrees, principal point at the image
     /// centre: `fy = (height/2) / tan(fov_y/2)`, `fx = fy`.
-    pub fn with_fov(position: DVec3, look_at: DVec3, up: DVec3, fov_y_deg: f64, resolution: [usize; 2]) -> Pinhole {
+    pub fn with_fov(
+        position: DVec3,
+        look_at: DVec3,
+        up: DVec3,
+        fov_y_deg: f64,
+        resolution: [usize; 2],
+    ) -> Pinhole {
         let [width, height] = resolution.map(|n| n as f64);
         let fy = (height / 2.0) / (fov_y_deg.to_radians() / 2.0).tan();
-        Pinhole { position, look_at, up, fx: fy, fy, cx: width / 2.0, cy: height / 2.0, resolution }
+        Pinhole {
+            position,
+            look_at,
+            up,
+            fx: fy,
+            fy,
+            cx: width / 2.0,
+            cy: height / 2.0,
+            resolution,
+        }
     }
 
     /// The camera frame (see [`Frame`]). Meaningless (NaN) for a degenerate camera, which the
@@ -115,7 +135,11 @@ impl Pinhole {
     pub fn frame(&self) -> Frame {
         let forward = (self.look_at - self.position).normalize();
         let right = forward.cross(self.up).normalize();
-        Frame { forward, right, up: right.cross(forward) }
+        Frame {
+            forward,
+            right,
+            up: right.cross(forward),
+        }
     }
 
     /// Why the frame is undefined, if it is: `("look_at", ..)` when `look_at == position`,
@@ -123,11 +147,17 @@ impl Pinhole {
     pub fn degeneracy(&self) -> Option<(&'static str, &'static str)> {
         let view = self.look_at - self.position;
         if view.length_squared() == 0.0 {
-            return Some(("look_at", "equals the camera position: the viewing direction is undefined"));
+            return Some((
+                "look_at",
+                "equals the camera position: the viewing direction is undefined",
+            ));
         }
         let normal = view.normalize().cross(self.up).length();
         if normal.is_nan() || normal <= 1e-9 * self.up.length() {
-            return Some(("up", "is zero or parallel to the viewing direction (look_at - position)"));
+            return Some((
+                "up",
+                "is zero or parallel to the viewing direction (look_at - position)",
+            ));
         }
         None
     }
@@ -147,7 +177,10 @@ impl Pinhole {
         let d = world - self.position;
         let depth = d.dot(f.forward);
         (depth > 0.0).then(|| {
-            [self.cx + self.fx * d.dot(f.right) / depth, self.cy - self.fy * d.dot(f.up) / depth]
+            [
+                self.cx + self.fx * d.dot(f.right) / depth,
+                self.cy - self.fy * d.dot(f.up) / depth,
+            ]
         })
     }
 
@@ -165,13 +198,20 @@ impl Rectified {
     /// `x = (px/W - 0.5) * width`, `y = -(py/H - 0.5) * height`, `z = 0`.
     pub fn surface_point(&self, sample: &Sample, pixel: [f64; 2]) -> DVec3 {
         let [w, h] = self.resolution.map(|n| n as f64);
-        DVec3::new((pixel[0] / w - 0.5) * sample.width, -(pixel[1] / h - 0.5) * sample.height, 0.0)
+        DVec3::new(
+            (pixel[0] / w - 0.5) * sample.width,
+            -(pixel[1] / h - 0.5) * sample.height,
+            0.0,
+        )
     }
 
     /// Inverse of [`Rectified::surface_point`] (orthographic along z).
     pub fn project(&self, sample: &Sample, world: DVec3) -> [f64; 2] {
         let [w, h] = self.resolution.map(|n| n as f64);
-        [(world.x / sample.width + 0.5) * w, (0.5 - world.y / sample.height) * h]
+        [
+            (world.x / sample.width + 0.5) * w,
+            (0.5 - world.y / sample.height) * h,
+        ]
     }
 }
 
@@ -181,7 +221,13 @@ mod tests {
     use proptest::prelude::*;
 
     fn looking_down(height: f64, fov_y_deg: f64, resolution: [usize; 2]) -> Pinhole {
-        Pinhole::with_fov(DVec3::new(0.0, 0.0, height), DVec3::ZERO, DVec3::Y, fov_y_deg, resolution)
+        Pinhole::with_fov(
+            DVec3::new(0.0, 0.0, height),
+            DVec3::ZERO,
+            DVec3::Y,
+            fov_y_deg,
+            resolution,
+        )
     }
 
     #[test]
@@ -198,9 +244,15 @@ mod tests {
         let c = looking_down(10.0, 90.0, [100, 100]);
         assert!((c.fy - 50.0).abs() < 1e-12);
         let p = c.project(DVec3::new(10.0, 0.0, 0.0)).unwrap();
-        assert!((p[0] - 100.0).abs() < 1e-9 && (p[1] - 50.0).abs() < 1e-9, "{p:?}");
+        assert!(
+            (p[0] - 100.0).abs() < 1e-9 && (p[1] - 50.0).abs() < 1e-9,
+            "{p:?}"
+        );
         let p = c.project(DVec3::new(0.0, 5.0, 0.0)).unwrap();
-        assert!((p[0] - 50.0).abs() < 1e-9 && (p[1] - 25.0).abs() < 1e-9, "{p:?}");
+        assert!(
+            (p[0] - 50.0).abs() < 1e-9 && (p[1] - 25.0).abs() < 1e-9,
+            "{p:?}"
+        );
         assert!((c.ray([50.0, 50.0]) - DVec3::NEG_Z).length() < 1e-15);
         // Behind the camera: no projection.
         assert_eq!(c.project(DVec3::new(0.0, 0.0, 20.0)), None);
@@ -242,10 +294,22 @@ mod tests {
 
     #[test]
     fn rectified_corners_map_to_sample_corners() {
-        let sample = Sample { width: 6.0, height: 4.0 };
-        let c = Rectified { position: DVec3::new(0.0, 0.0, 20.0), resolution: [30, 20] };
-        assert_eq!(c.surface_point(&sample, [0.0, 0.0]), DVec3::new(-3.0, 2.0, 0.0));
-        assert_eq!(c.surface_point(&sample, [30.0, 20.0]), DVec3::new(3.0, -2.0, 0.0));
+        let sample = Sample {
+            width: 6.0,
+            height: 4.0,
+        };
+        let c = Rectified {
+            position: DVec3::new(0.0, 0.0, 20.0),
+            resolution: [30, 20],
+        };
+        assert_eq!(
+            c.surface_point(&sample, [0.0, 0.0]),
+            DVec3::new(-3.0, 2.0, 0.0)
+        );
+        assert_eq!(
+            c.surface_point(&sample, [30.0, 20.0]),
+            DVec3::new(3.0, -2.0, 0.0)
+        );
         assert_eq!(c.surface_point(&sample, [15.0, 10.0]), DVec3::ZERO);
         // MaterialGAN pixel-centre formula: x = ((c+0.5)/N - 0.5) S, y = -((r+0.5)/N - 0.5) S.
         let p = c.surface_point(&sample, [3.5, 7.5]);

@@ -28,14 +28,19 @@ pub(crate) fn above_sample_plane(v: [f64; 3]) -> Result<DVec3, String> {
     if p.z > 0.0 {
         Ok(p)
     } else {
-        Err(format!("must be above the sample plane (z > 0), got z = {}", p.z))
+        Err(format!(
+            "must be above the sample plane (z > 0), got z = {}",
+            p.z
+        ))
     }
 }
 
 /// An RGB light power (intensity or irradiance): finite, non-negative, not all zero.
 pub(crate) fn light_power(rgb: [f64; 3]) -> Result<[f64; 3], String> {
     if rgb.iter().any(|c| !c.is_finite() || *c < 0.0) {
-        Err(format!("must be finite and non-negative per channel, got {rgb:?}"))
+        Err(format!(
+            "must be finite and non-negative per channel, got {rgb:?}"
+        ))
     } else if rgb.iter().all(|c| *c == 0.0) {
         Err("is zero in every channel: the photo would be black".to_string())
     } else {
@@ -62,13 +67,18 @@ mod tests {
         for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
             assert!(positive(bad).is_err(), "{bad}");
         }
-        assert_eq!(above_sample_plane([1.0, 2.0, 3.0]), Ok(DVec3::new(1.0, 2.0, 3.0)));
+        assert_eq!(
+            above_sample_plane([1.0, 2.0, 3.0]),
+            Ok(DVec3::new(1.0, 2.0, 3.0))
+        );
         assert!(above_sample_plane([1.0, 2.0, 0.0]).is_err());
         assert!(above_sample_plane([1.0, 2.0, -3.0]).is_err());
         assert!(above_sample_plane([f64::NAN, 2.0, 3.0]).is_err());
         assert_eq!(light_power([0.0, 1.0, 0.0]), Ok([0.0, 1.0, 0.0]));
         assert!(light_power([0.0, 0.0, 0.0]).unwrap_err().contains("zero"));
-        assert!(light_power([1.0, -1.0, 1.0]).unwrap_err().contains("non-negative"));
+        assert!(light_power([1.0, -1.0, 1.0])
+            .unwrap_err()
+            .contains("non-negative"));
         assert!(light_power([1.0, f64::INFINITY, 1.0]).is_err());
         assert_eq!(resolution([3, 4]), Ok([3, 4]));
         assert!(resolution([0, 4]).is_err() && resolution([4, 0]).is_err());

@@ -139,7 +139,9 @@ pub fn linear_to_gamma(v: f64, gamma: f64) -> f64 {
 /// A decoded image: linear RGB, row-major, row 0 at the top.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinearImage {
+    /// Width in pixels.
     pub width: usize,
+    /// Height in pixels.
     pub height: usize,
     /// Linear RGB per pixel, index `row * width + column`.
     pub rgb: Vec<[f32; 3]>,
@@ -168,7 +170,11 @@ impl ImageKind {
 
     fn of_supported(path: &Path) -> Result<ImageKind> {
         ImageKind::of(path).ok_or_else(|| {
-            Error::invalid(path, "file type", "unsupported image extension; expected .exr, .png, .jpg or .jpeg")
+            Error::invalid(
+                path,
+                "file type",
+                "unsupported image extension; expected .exr, .png, .jpg or .jpeg",
+            )
         })
     }
 }
@@ -231,7 +237,12 @@ fn load_integer_image(path: &Path, encoding: ColorEncoding) -> Result<LinearImag
         }
         _ => decode_integer_samples(decoded.into_rgb8().as_raw(), encoding),
     };
-    Ok(LinearImage { width, height, rgb, saturated })
+    Ok(LinearImage {
+        width,
+        height,
+        rgb,
+        saturated,
+    })
 }
 
 /// Integer sample types of PNG/JPEG (u8, u16) with their maximum.
@@ -278,7 +289,11 @@ pub fn load_mask(path: &Path, width: usize, height: usize) -> Result<Vec<bool>> 
             ),
         ));
     }
-    Ok(mask.rgb.iter().map(|p| p.iter().any(|&v| v != 0.0)).collect())
+    Ok(mask
+        .rgb
+        .iter()
+        .map(|p| p.iter().any(|&v| v != 0.0))
+        .collect())
 }
 
 /// Checks that `rgb` holds exactly `width * height` pixels and the image is not empty.
@@ -303,7 +318,10 @@ pub fn write_exr(path: &Path, rgb: &[[f32; 3]], width: usize, height: usize) -> 
     });
     let image = Image::from_channels((width, height), channels);
     write_atomically(path, |file| {
-        image.write().to_buffered(file).map_err(|e| Error::io(path, e))
+        image
+            .write()
+            .to_buffered(file)
+            .map_err(|e| Error::io(path, e))
     })
 }
 
@@ -317,7 +335,13 @@ pub fn write_png_tonemapped(
     exposure: f64,
 ) -> Result<()> {
     check_pixel_count(path, rgb, width, height)?;
-    let too_large = || Error::invalid(path, "pixels", format!("{width}x{height} is too large for PNG"));
+    let too_large = || {
+        Error::invalid(
+            path,
+            "pixels",
+            format!("{width}x{height} is too large for PNG"),
+        )
+    };
     let (png_width, png_height) = (
         u32::try_from(width).map_err(|_| too_large())?,
         u32::try_from(height).map_err(|_| too_large())?,
@@ -327,13 +351,22 @@ pub fn write_png_tonemapped(
         .flatten()
         .map(|&v| {
             let scaled = f64::from(v) * exposure;
-            let clamped = if scaled.is_nan() { 0.0 } else { scaled.clamp(0.0, 1.0) };
+            let clamped = if scaled.is_nan() {
+                0.0
+            } else {
+                scaled.clamp(0.0, 1.0)
+            };
             (linear_to_srgb(clamped) * 255.0).round() as u8
         })
         .collect();
     write_atomically(path, |file| {
         image::codecs::png::PngEncoder::new(file)
-            .write_image(&bytes, png_width, png_height, image::ExtendedColorType::Rgb8)
+            .write_image(
+                &bytes,
+                png_width,
+                png_height,
+                image::ExtendedColorType::Rgb8,
+            )
             .map_err(|e| Error::io(path, e))
     })
 }
@@ -344,7 +377,11 @@ mod tests {
 
     #[test]
     fn srgb_half_is_0_2140_linear_and_round_trips() {
-        assert!((srgb_to_linear(0.5) - 0.21404).abs() < 1e-5, "{}", srgb_to_linear(0.5));
+        assert!(
+            (srgb_to_linear(0.5) - 0.21404).abs() < 1e-5,
+            "{}",
+            srgb_to_linear(0.5)
+        );
         assert!((linear_to_srgb(0.21404114) - 0.5).abs() < 1e-7);
         // Both segments and the breakpoints, and the end points exactly.
         assert_eq!(srgb_to_linear(0.0), 0.0);
@@ -369,7 +406,10 @@ mod tests {
         assert!((linear_to_gamma(0.5f64.powf(2.2), 2.2) - 0.5).abs() < 1e-15);
         for i in -100..=100 {
             let v = f64::from(i) / 50.0;
-            assert!((linear_to_gamma(gamma_to_linear(v, 2.2), 2.2) - v).abs() < 1e-12, "{v}");
+            assert!(
+                (linear_to_gamma(gamma_to_linear(v, 2.2), 2.2) - v).abs() < 1e-12,
+                "{v}"
+            );
         }
         let e = ColorEncoding::Gamma(1.8);
         assert!((e.decode(e.encode(0.3)) - 0.3).abs() < 1e-15);
@@ -386,7 +426,15 @@ mod tests {
             assert_eq!(text.parse::<ColorEncoding>().unwrap(), encoding);
             assert_eq!(encoding.to_string(), text);
         }
-        for bad in ["sRGB", "gamma:", "gamma:-1", "gamma:0", "gamma:inf", "gamma:x", ""] {
+        for bad in [
+            "sRGB",
+            "gamma:",
+            "gamma:-1",
+            "gamma:0",
+            "gamma:inf",
+            "gamma:x",
+            "",
+        ] {
             assert!(bad.parse::<ColorEncoding>().is_err(), "{bad}");
         }
         #[derive(serde::Serialize, serde::Deserialize)]
@@ -396,9 +444,18 @@ mod tests {
         let h: Holder = toml::from_str("color = \"gamma:2.4\"").unwrap();
         assert_eq!(h.color, ColorEncoding::Gamma(2.4));
         assert_eq!(toml::to_string(&h).unwrap().trim(), "color = \"gamma:2.4\"");
-        assert_eq!(ColorEncoding::default_for(Path::new("a/b.EXR")), ColorEncoding::Linear);
-        assert_eq!(ColorEncoding::default_for(Path::new("a/b.png")), ColorEncoding::Srgb);
-        assert_eq!(ColorEncoding::default_for(Path::new("a/b.jpg")), ColorEncoding::Srgb);
+        assert_eq!(
+            ColorEncoding::default_for(Path::new("a/b.EXR")),
+            ColorEncoding::Linear
+        );
+        assert_eq!(
+            ColorEncoding::default_for(Path::new("a/b.png")),
+            ColorEncoding::Srgb
+        );
+        assert_eq!(
+            ColorEncoding::default_for(Path::new("a/b.jpg")),
+            ColorEncoding::Srgb
+        );
     }
 
     #[test]
@@ -406,7 +463,16 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("x.exr");
         let (w, h) = (5, 3);
-        let special = [1.0e-40_f32, 3.4e38, -2.5, 0.1, 1.0 / 3.0, 0.0, 65504.5, 1e-7];
+        let special = [
+            1.0e-40_f32,
+            3.4e38,
+            -2.5,
+            0.1,
+            1.0 / 3.0,
+            0.0,
+            65504.5,
+            1e-7,
+        ];
         let rgb: Vec<[f32; 3]> = (0..w * h)
             .map(|i| {
                 let f = |k: usize| special[(3 * i + k) % special.len()] * (1.0 + i as f32 / 7.0);
@@ -435,8 +501,13 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("x.png");
         // Pixels: all max, one channel max, one below max, mid grey.
-        let raw: Vec<u16> = vec![65535, 65535, 65535, 10, 65535, 20, 65534, 65534, 65534, 32768, 0, 1];
-        image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(2, 2, raw).unwrap().save(&path).unwrap();
+        let raw: Vec<u16> = vec![
+            65535, 65535, 65535, 10, 65535, 20, 65534, 65534, 65534, 32768, 0, 1,
+        ];
+        image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(2, 2, raw)
+            .unwrap()
+            .save(&path)
+            .unwrap();
         let img = load_image(&path, ColorEncoding::Srgb).unwrap();
         assert_eq!(img.saturated, vec![true, true, false, false]);
         let expected = srgb_to_linear(32768.0 / 65535.0) as f32;
@@ -451,7 +522,10 @@ mod tests {
     fn eight_bit_grey_png_is_expanded_and_gamma_decoded() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("g.png");
-        image::GrayImage::from_raw(3, 1, vec![0, 128, 255]).unwrap().save(&path).unwrap();
+        image::GrayImage::from_raw(3, 1, vec![0, 128, 255])
+            .unwrap()
+            .save(&path)
+            .unwrap();
         let img = load_image(&path, ColorEncoding::Gamma(2.2)).unwrap();
         let mid = (128.0f64 / 255.0).powf(2.2) as f32;
         assert_eq!(img.rgb, vec![[0.0; 3], [mid; 3], [1.0; 3]]);
@@ -462,13 +536,23 @@ mod tests {
     fn unreadable_images_name_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let missing = dir.path().join("missing.png");
-        assert!(load_image(&missing, ColorEncoding::Srgb).unwrap_err().to_string().contains("missing.png"));
+        assert!(load_image(&missing, ColorEncoding::Srgb)
+            .unwrap_err()
+            .to_string()
+            .contains("missing.png"));
         let garbage = dir.path().join("garbage.png");
         std::fs::write(&garbage, b"not a png").unwrap();
-        let err = load_image(&garbage, ColorEncoding::Srgb).unwrap_err().to_string();
-        assert!(err.contains("garbage.png") && err.contains("image data"), "{err}");
+        let err = load_image(&garbage, ColorEncoding::Srgb)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("garbage.png") && err.contains("image data"),
+            "{err}"
+        );
         let tiff = dir.path().join("x.tiff");
-        let err = load_image(&tiff, ColorEncoding::Srgb).unwrap_err().to_string();
+        let err = load_image(&tiff, ColorEncoding::Srgb)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("x.tiff") && err.contains("file type"), "{err}");
     }
 
@@ -476,10 +560,19 @@ mod tests {
     fn mask_keeps_nonzero_pixels_and_checks_resolution() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("m.png");
-        image::GrayImage::from_raw(2, 2, vec![0, 1, 255, 0]).unwrap().save(&path).unwrap();
-        assert_eq!(load_mask(&path, 2, 2).unwrap(), vec![false, true, true, false]);
+        image::GrayImage::from_raw(2, 2, vec![0, 1, 255, 0])
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        assert_eq!(
+            load_mask(&path, 2, 2).unwrap(),
+            vec![false, true, true, false]
+        );
         let err = load_mask(&path, 3, 2).unwrap_err().to_string();
-        assert!(err.contains("m.png") && err.contains("2x2") && err.contains("3x2"), "{err}");
+        assert!(
+            err.contains("m.png") && err.contains("2x2") && err.contains("3x2"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -487,11 +580,19 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.png");
         let half_srgb = srgb_to_linear(0.5) as f32;
-        let rgb = [[half_srgb / 2.0, 10.0, -1.0], [f32::NAN, 0.0, f32::INFINITY]];
+        let rgb = [
+            [half_srgb / 2.0, 10.0, -1.0],
+            [f32::NAN, 0.0, f32::INFINITY],
+        ];
         write_png_tonemapped(&path, &rgb, 2, 1, 2.0).unwrap();
         let back = image::open(&path).unwrap().into_rgb8();
         assert_eq!(back.as_raw(), &vec![128, 255, 0, 0, 0, 255]);
-        let err = write_png_tonemapped(&path, &rgb, 3, 1, 1.0).unwrap_err().to_string();
-        assert!(err.contains("t.png") && err.contains("2 pixels given for a 3x1 image"), "{err}");
+        let err = write_png_tonemapped(&path, &rgb, 3, 1, 1.0)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("t.png") && err.contains("2 pixels given for a 3x1 image"),
+            "{err}"
+        );
     }
 }

@@ -42,9 +42,15 @@ impl<'a> Table<'a> {
         key: &str,
         check: impl FnOnce(T) -> Result<U, String>,
     ) -> Result<Option<U>> {
-        let Some(value) = self.entries.remove(key) else { return Ok(None) };
-        let typed: T = value.try_into().map_err(|e: toml::de::Error| self.error(key, e.message()))?;
-        check(typed).map(Some).map_err(|message| self.error(key, message))
+        let Some(value) = self.entries.remove(key) else {
+            return Ok(None);
+        };
+        let typed: T = value
+            .try_into()
+            .map_err(|e: toml::de::Error| self.error(key, e.message()))?;
+        check(typed)
+            .map(Some)
+            .map_err(|message| self.error(key, message))
     }
 
     /// Like [`Table::optional`], but a missing key is an error.
@@ -53,7 +59,8 @@ impl<'a> Table<'a> {
         key: &str,
         check: impl FnOnce(T) -> Result<U, String>,
     ) -> Result<U> {
-        self.optional(key, check)?.ok_or_else(|| self.error(key, "missing"))
+        self.optional(key, check)?
+            .ok_or_else(|| self.error(key, "missing"))
     }
 
     /// Like [`Table::optional`], remembering where the value came from.
@@ -63,17 +70,24 @@ impl<'a> Table<'a> {
         check: impl FnOnce(T) -> Result<U, String>,
     ) -> Result<Option<Sourced<U>>> {
         let field = self.field(key);
-        Ok(self.optional(key, check)?.map(|value| Sourced { value, field }))
+        Ok(self
+            .optional(key, check)?
+            .map(|value| Sourced { value, field }))
     }
 
     fn sub_table(&mut self, key: &str) -> Result<Option<Table<'a>>> {
         let path = self.field(key);
         let entries = self.optional::<toml::Table, _>(key, Ok)?;
-        Ok(entries.map(|entries| Table { manifest: self.manifest, path, entries }))
+        Ok(entries.map(|entries| Table {
+            manifest: self.manifest,
+            path,
+            entries,
+        }))
     }
 
     fn required_sub_table(&mut self, key: &str) -> Result<Table<'a>> {
-        self.sub_table(key)?.ok_or_else(|| self.error(key, "missing"))
+        self.sub_table(key)?
+            .ok_or_else(|| self.error(key, "missing"))
     }
 
     /// An array of tables (`[[photo]]`), each with the path `key[i]`.
@@ -83,14 +97,22 @@ impl<'a> Table<'a> {
         Ok(list
             .into_iter()
             .enumerate()
-            .map(|(i, entries)| Table { manifest: self.manifest, path: format!("{path}[{i}]"), entries })
+            .map(|(i, entries)| Table {
+                manifest: self.manifest,
+                path: format!("{path}[{i}]"),
+                entries,
+            })
             .collect())
     }
 
     /// Reports every key nobody asked for as a warning.
     fn finish(self, warnings: &mut Vec<String>) {
         for key in self.entries.keys() {
-            warnings.push(format!("{}: {}: unknown key, ignored", self.manifest.display(), self.field(key)));
+            warnings.push(format!(
+                "{}: {}: unknown key, ignored",
+                self.manifest.display(),
+                self.field(key)
+            ));
         }
     }
 }
@@ -145,7 +167,9 @@ impl CameraFields {
             model: t.sourced("model", |name: String| match name.as_str() {
                 "pinhole" => Ok(CameraModel::Pinhole),
                 "rectified" => Ok(CameraModel::Rectified),
-                _ => Err(format!("unknown camera model `{name}`; expected \"pinhole\" or \"rectified\"")),
+                _ => Err(format!(
+                    "unknown camera model `{name}`; expected \"pinhole\" or \"rectified\""
+                )),
             })?,
             position: t.sourced("position", checks::above_sample_plane)?,
             look_at: t.sourced("look_at", checks::finite)?,
@@ -154,7 +178,9 @@ impl CameraFields {
                 if deg > 0.0 && deg < 180.0 {
                     Ok(deg)
                 } else {
-                    Err(format!("must be between 0 and 180 degrees (exclusive), got {deg}"))
+                    Err(format!(
+                        "must be between 0 and 180 degrees (exclusive), got {deg}"
+                    ))
                 }
             })?,
             fx: t.sourced("fx", checks::positive)?,
@@ -183,9 +209,21 @@ impl CameraFields {
             position: pick(&over.position, &self.position),
             look_at: pick(&over.look_at, &self.look_at),
             up: pick(&over.up, &self.up),
-            fov_y_deg: if focal_given { over.fov_y_deg.clone() } else { pick(&over.fov_y_deg, &self.fov_y_deg) },
-            fx: if fov_given { over.fx.clone() } else { pick(&over.fx, &self.fx) },
-            fy: if fov_given { over.fy.clone() } else { pick(&over.fy, &self.fy) },
+            fov_y_deg: if focal_given {
+                over.fov_y_deg.clone()
+            } else {
+                pick(&over.fov_y_deg, &self.fov_y_deg)
+            },
+            fx: if fov_given {
+                over.fx.clone()
+            } else {
+                pick(&over.fx, &self.fx)
+            },
+            fy: if fov_given {
+                over.fy.clone()
+            } else {
+                pick(&over.fy, &self.fy)
+            },
             cx: pick(&over.cx, &self.cx),
             cy: pick(&over.cy, &self.cy),
             resolution: pick(&over.resolution, &self.resolution),
@@ -194,7 +232,12 @@ impl CameraFields {
 
     /// The camera of photo `photo` from the merged keys.
     fn resolve(&self, manifest: &Path, photo: usize, warnings: &mut Vec<String>) -> Result<Camera> {
-        fn value<'s, T>(manifest: &Path, photo: usize, key: &str, field: &'s Option<Sourced<T>>) -> Result<&'s Sourced<T>> {
+        fn value<'s, T>(
+            manifest: &Path,
+            photo: usize,
+            key: &str,
+            field: &'s Option<Sourced<T>>,
+        ) -> Result<&'s Sourced<T>> {
             field.as_ref().ok_or_else(|| {
                 Error::invalid(
                     manifest,
@@ -208,17 +251,34 @@ impl CameraFields {
         let resolution = value(manifest, photo, "resolution", &self.resolution)?.value;
         if model.value == CameraModel::Rectified {
             self.warn_pinhole_keys_beside(model, manifest, warnings);
-            return Ok(Camera::Rectified(Rectified { position, resolution }));
+            return Ok(Camera::Rectified(Rectified {
+                position,
+                resolution,
+            }));
         }
         let look_at = value(manifest, photo, "look_at", &self.look_at)?;
         let up = value(manifest, photo, "up", &self.up)?;
         let mut pinhole = match &self.fov_y_deg {
-            Some(fov) => Pinhole::with_fov(position, look_at.value, up.value, fov.value, resolution),
+            Some(fov) => {
+                Pinhole::with_fov(position, look_at.value, up.value, fov.value, resolution)
+            }
             None => {
                 let focal = |key, field| value(manifest, photo, key, field).map(|s| s.value);
-                let (fx, fy) = (focal("fx (or fov_y_deg)", &self.fx)?, focal("fy (or fov_y_deg)", &self.fy)?);
+                let (fx, fy) = (
+                    focal("fx (or fov_y_deg)", &self.fx)?,
+                    focal("fy (or fov_y_deg)", &self.fy)?,
+                );
                 let [cx, cy] = resolution.map(|n| n as f64 / 2.0);
-                Pinhole { position, look_at: look_at.value, up: up.value, fx, fy, cx, cy, resolution }
+                Pinhole {
+                    position,
+                    look_at: look_at.value,
+                    up: up.value,
+                    fx,
+                    fy,
+                    cx,
+                    cy,
+                    resolution,
+                }
             }
         };
         if let Some(cx) = &self.cx {
@@ -228,7 +288,11 @@ impl CameraFields {
             pinhole.cy = cy.value;
         }
         if let Some((key, message)) = pinhole.degeneracy() {
-            let field = if key == "up" { &up.field } else { &look_at.field };
+            let field = if key == "up" {
+                &up.field
+            } else {
+                &look_at.field
+            };
             return Err(Error::invalid(manifest, field, message));
         }
         Ok(Camera::Pinhole(pinhole))
@@ -236,12 +300,29 @@ impl CameraFields {
 
     /// Warns once per key about pinhole-only keys written in the table that declares
     /// `model = "rectified"` (inherited ones are legitimately unused).
-    fn warn_pinhole_keys_beside(&self, model: &Sourced<CameraModel>, manifest: &Path, warnings: &mut Vec<String>) {
-        let vectors = [&self.look_at, &self.up].into_iter().flatten().map(|s| s.field.as_str());
-        let numbers = [&self.fov_y_deg, &self.fx, &self.fy, &self.cx, &self.cy].into_iter().flatten();
-        let same_table = |field: &str| field.rsplit_once('.').map_or("", |(t, _)| t) == model.table();
-        for field in vectors.chain(numbers.map(|s| s.field.as_str())).filter(|f| same_table(f)) {
-            let warning = format!("{}: {field}: not used by the rectified camera model, ignored", manifest.display());
+    fn warn_pinhole_keys_beside(
+        &self,
+        model: &Sourced<CameraModel>,
+        manifest: &Path,
+        warnings: &mut Vec<String>,
+    ) {
+        let vectors = [&self.look_at, &self.up]
+            .into_iter()
+            .flatten()
+            .map(|s| s.field.as_str());
+        let numbers = [&self.fov_y_deg, &self.fx, &self.fy, &self.cx, &self.cy]
+            .into_iter()
+            .flatten();
+        let same_table =
+            |field: &str| field.rsplit_once('.').map_or("", |(t, _)| t) == model.table();
+        for field in vectors
+            .chain(numbers.map(|s| s.field.as_str()))
+            .filter(|f| same_table(f))
+        {
+            let warning = format!(
+                "{}: {field}: not used by the rectified camera model, ignored",
+                manifest.display()
+            );
             if !warnings.contains(&warning) {
                 warnings.push(warning);
             }
@@ -251,23 +332,26 @@ impl CameraFields {
 
 fn read_light(mut t: Table, warnings: &mut Vec<String>) -> Result<Light> {
     let kind: String = t.required("kind", Ok)?;
-    let light = match kind.as_str() {
-        "point" => Light::Point {
-            position: t.required("position", checks::above_sample_plane)?,
-            intensity: t.required("intensity", checks::light_power)?,
-        },
-        "directional" => Light::Directional {
-            direction: t.required("direction", checks::above_sample_plane)?,
-            irradiance: t.required("irradiance", checks::light_power)?,
-        },
-        "flash" => Light::Flash { intensity: t.required("intensity", checks::light_power)? },
-        _ => {
-            return Err(t.error(
+    let light =
+        match kind.as_str() {
+            "point" => Light::Point {
+                position: t.required("position", checks::above_sample_plane)?,
+                intensity: t.required("intensity", checks::light_power)?,
+            },
+            "directional" => Light::Directional {
+                direction: t.required("direction", checks::above_sample_plane)?,
+                irradiance: t.required("irradiance", checks::light_power)?,
+            },
+            "flash" => Light::Flash {
+                intensity: t.required("intensity", checks::light_power)?,
+            },
+            _ => return Err(t.error(
                 "kind",
-                format!("unknown light kind `{kind}`; expected \"point\", \"directional\" or \"flash\""),
-            ))
-        }
-    };
+                format!(
+                    "unknown light kind `{kind}`; expected \"point\", \"directional\" or \"flash\""
+                ),
+            )),
+        };
     t.finish(warnings);
     Ok(light)
 }
@@ -302,24 +386,45 @@ fn read_photo(
         None => CameraFields::default(),
     };
     t.finish(warnings);
-    let camera = default_camera.overlay(&own_camera).resolve(manifest, index, warnings)?;
-    Ok(Photo { image, camera, light, exposure, mask, saturated_mask, color })
+    let camera = default_camera
+        .overlay(&own_camera)
+        .resolve(manifest, index, warnings)?;
+    Ok(Photo {
+        image,
+        camera,
+        light,
+        exposure,
+        mask,
+        saturated_mask,
+        color,
+    })
 }
 
 /// The line number of a byte offset, for syntax errors.
 fn line_of(text: &str, offset: usize) -> usize {
-    text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
+    text.as_bytes()[..offset.min(text.len())]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
 }
 
 /// Reads and validates the manifest at `manifest`.
 pub(super) fn read(manifest: &Path) -> Result<Capture> {
     let text = std::fs::read_to_string(manifest).map_err(|e| Error::io(manifest, e))?;
     let entries: toml::Table = toml::from_str(&text).map_err(|e| {
-        let line = e.span().map_or_else(|| "TOML syntax".to_string(), |s| format!("line {}", line_of(&text, s.start)));
+        let line = e.span().map_or_else(
+            || "TOML syntax".to_string(),
+            |s| format!("line {}", line_of(&text, s.start)),
+        );
         Error::invalid(manifest, line, e.message())
     })?;
     let mut warnings = Vec::new();
-    let mut top = Table { manifest, path: String::new(), entries };
+    let mut top = Table {
+        manifest,
+        path: String::new(),
+        entries,
+    };
     let name = top.required::<String, _>("name", Ok)?;
     let units = top.required::<String, _>("units", Ok)?;
     let mut sample_table = top.required_sub_table("sample")?;
@@ -353,7 +458,15 @@ pub(super) fn read(manifest: &Path) -> Result<Capture> {
         }
     }
     let root = absolute_folder(folder_of(manifest))?;
-    Ok(Capture { name, units, root, sample, color, photos, warnings })
+    Ok(Capture {
+        name,
+        units,
+        root,
+        sample,
+        color,
+        photos,
+        warnings,
+    })
 }
 
 /// The manifest as written: values before tables, defaults left out.
@@ -391,11 +504,18 @@ pub(super) fn write(capture: &Capture, path: &Path) -> Result<()> {
         .ok_or_else(|| Error::invalid(path, "photo", "a capture without photos cannot be saved"))?;
     let keep_relative = absolute_folder(folder_of(path))? == absolute_folder(&capture.root)?;
     let path_text = |file: &Path, field: String| -> Result<String> {
-        let written = if keep_relative { file.to_path_buf() } else { absolute_folder(&capture.root)?.join(file) };
-        written
-            .to_str()
-            .map(str::to_owned)
-            .ok_or_else(|| Error::invalid(path, field, format!("{} is not valid UTF-8", written.display())))
+        let written = if keep_relative {
+            file.to_path_buf()
+        } else {
+            absolute_folder(&capture.root)?.join(file)
+        };
+        written.to_str().map(str::to_owned).ok_or_else(|| {
+            Error::invalid(
+                path,
+                field,
+                format!("{} is not valid UTF-8", written.display()),
+            )
+        })
     };
     let photo = capture
         .photos
@@ -403,9 +523,13 @@ pub(super) fn write(capture: &Capture, path: &Path) -> Result<()> {
         .enumerate()
         .map(|(i, p)| {
             let optional_path = |file: &Option<PathBuf>, key: &str| {
-                file.as_deref().map(|f| path_text(f, format!("photo[{i}].{key}"))).transpose()
+                file.as_deref()
+                    .map(|f| path_text(f, format!("photo[{i}].{key}")))
+                    .transpose()
             };
-            let default_color = capture.color.unwrap_or_else(|| ColorEncoding::default_for(&p.image));
+            let default_color = capture
+                .color
+                .unwrap_or_else(|| ColorEncoding::default_for(&p.image));
             Ok(PhotoOut {
                 image: path_text(&p.image, format!("photo[{i}].image"))?,
                 exposure: p.exposure,
@@ -425,8 +549,12 @@ pub(super) fn write(capture: &Capture, path: &Path) -> Result<()> {
         camera: &first.camera,
         photo,
     };
-    let text = toml::to_string(&out).map_err(|e| Error::invalid(path, "manifest", e.to_string()))?;
-    write_atomically(path, |file| file.write_all(text.as_bytes()).map_err(|e| Error::io(path, e)))
+    let text =
+        toml::to_string(&out).map_err(|e| Error::invalid(path, "manifest", e.to_string()))?;
+    write_atomically(path, |file| {
+        file.write_all(text.as_bytes())
+            .map_err(|e| Error::io(path, e))
+    })
 }
 
 #[cfg(test)]
@@ -487,17 +615,34 @@ exposure = 1.0
         let c = Capture::open(&path).unwrap();
         assert_eq!((c.name.as_str(), c.units.as_str()), ("copper-a03", "cm"));
         assert_eq!(c.root, std::path::absolute(dir.path()).unwrap());
-        assert_eq!(c.sample, Sample { width: 10.0, height: 10.0 });
+        assert_eq!(
+            c.sample,
+            Sample {
+                width: 10.0,
+                height: 10.0
+            }
+        );
         assert!(c.warnings.is_empty(), "{:?}", c.warnings);
         assert_eq!(c.photos.len(), 1);
         let p = &c.photos[0];
         assert_eq!(p.image, PathBuf::from("000.exr"));
         assert_eq!(p.color, ColorEncoding::Linear);
         assert_eq!(p.exposure, 1.0);
-        assert_eq!(p.light, Light::Point { position: DVec3::new(0.0, 0.0, 30.0), intensity: [1000.0; 3] });
-        let Camera::Pinhole(cam) = &p.camera else { panic!("{:?}", p.camera) };
+        assert_eq!(
+            p.light,
+            Light::Point {
+                position: DVec3::new(0.0, 0.0, 30.0),
+                intensity: [1000.0; 3]
+            }
+        );
+        let Camera::Pinhole(cam) = &p.camera else {
+            panic!("{:?}", p.camera)
+        };
         assert!((cam.fy - 64.0 / 15f64.to_radians().tan()).abs() < 1e-12);
-        assert_eq!((cam.fx, cam.cx, cam.cy, cam.resolution), (cam.fy, 64.0, 64.0, [128, 128]));
+        assert_eq!(
+            (cam.fx, cam.cx, cam.cy, cam.resolution),
+            (cam.fy, 64.0, 64.0, [128, 128])
+        );
         // Opening the folder finds the same manifest.
         assert_eq!(Capture::open(dir.path()).unwrap(), c);
     }
@@ -524,23 +669,44 @@ camera = { model = "rectified", resolution = [32, 16] }
         );
         let c = open_text(&text).unwrap();
         assert!(c.warnings.is_empty(), "{:?}", c.warnings);
-        let Camera::Pinhole(base) = c.photos[0].camera.clone() else { panic!() };
-        assert_eq!(c.photos[1].camera, Camera::Pinhole(Pinhole { position: DVec3::new(1.0, 2.0, 20.0), ..base.clone() }));
+        let Camera::Pinhole(base) = c.photos[0].camera.clone() else {
+            panic!()
+        };
+        assert_eq!(
+            c.photos[1].camera,
+            Camera::Pinhole(Pinhole {
+                position: DVec3::new(1.0, 2.0, 20.0),
+                ..base.clone()
+            })
+        );
         assert_eq!(c.photos[1].color, ColorEncoding::Srgb);
         assert_eq!(
             c.photos[2].camera,
-            Camera::Pinhole(Pinhole { fx: 100.0, fy: 90.0, cx: 64.0, cy: 60.0, ..base.clone() })
+            Camera::Pinhole(Pinhole {
+                fx: 100.0,
+                fy: 90.0,
+                cx: 64.0,
+                cy: 60.0,
+                ..base.clone()
+            })
         );
         assert_eq!(c.photos[2].color, ColorEncoding::Gamma(2.2));
         assert_eq!(
             c.photos[3].camera,
-            Camera::Rectified(Rectified { position: DVec3::new(0.0, 0.0, 30.0), resolution: [32, 16] })
+            Camera::Rectified(Rectified {
+                position: DVec3::new(0.0, 0.0, 30.0),
+                resolution: [32, 16]
+            })
         );
     }
 
     #[test]
     fn top_level_color_is_the_default_of_every_photo() {
-        let c = open_text(&example_with("units = \"cm\"", "units = \"cm\"\ncolor = \"srgb\"")).unwrap();
+        let c = open_text(&example_with(
+            "units = \"cm\"",
+            "units = \"cm\"\ncolor = \"srgb\"",
+        ))
+        .unwrap();
         assert_eq!(c.color, Some(ColorEncoding::Srgb));
         assert_eq!(c.photos[0].color, ColorEncoding::Srgb);
     }
@@ -556,7 +722,10 @@ camera = { model = "rectified", resolution = [32, 16] }
         let m = error_of(&example_with("look_at = [0.0, 0.0, 0.0]", ""));
         assert!(m.contains("photo[0].camera.look_at: missing"), "{m}");
         let m = error_of(&example_with("fov_y_deg = 30.0", ""));
-        assert!(m.contains("photo[0].camera.fx (or fov_y_deg): missing"), "{m}");
+        assert!(
+            m.contains("photo[0].camera.fx (or fov_y_deg): missing"),
+            "{m}"
+        );
         let m = error_of(&example_with("[[photo]]", "[[nophoto]]"));
         assert!(m.contains(": photo: missing"), "{m}");
     }
@@ -564,32 +733,83 @@ camera = { model = "rectified", resolution = [32, 16] }
     #[test]
     fn wrong_types_give_serde_message_and_path() {
         let m = error_of(&example_with("exposure = 1.0", "exposure = \"bright\""));
-        assert!(m.contains("photo[0].exposure: invalid type: string \"bright\", expected f64"), "{m}");
-        let m = error_of(&example_with("resolution = [128, 128]", "resolution = [128]"));
+        assert!(
+            m.contains("photo[0].exposure: invalid type: string \"bright\", expected f64"),
+            "{m}"
+        );
+        let m = error_of(&example_with(
+            "resolution = [128, 128]",
+            "resolution = [128]",
+        ));
         assert!(m.contains("camera.resolution: invalid length 1"), "{m}");
-        let m = error_of(&example_with("[0.0, 0.0, 30.0], intensity", "[0.0, 30.0], intensity"));
-        assert!(m.contains("photo[0].light.position: invalid length 2"), "{m}");
-        let m = error_of(&example_with("units = \"cm\"", "units = \"cm\"\ncolor = \"rgb\""));
+        let m = error_of(&example_with(
+            "[0.0, 0.0, 30.0], intensity",
+            "[0.0, 30.0], intensity",
+        ));
+        assert!(
+            m.contains("photo[0].light.position: invalid length 2"),
+            "{m}"
+        );
+        let m = error_of(&example_with(
+            "units = \"cm\"",
+            "units = \"cm\"\ncolor = \"rgb\"",
+        ));
         assert!(m.contains(": color: `rgb` is not a colour encoding"), "{m}");
-        let m = error_of(&example_with("image = \"000.exr\"", "image = \"000.exr\"\ncolor = \"gamma:0\""));
-        assert!(m.contains("photo[0].color: gamma must be finite and positive"), "{m}");
-        let m = error_of(&example_with("name = \"copper-a03\"", "name = \"copper-a03\"\nname2 = [1, "));
+        let m = error_of(&example_with(
+            "image = \"000.exr\"",
+            "image = \"000.exr\"\ncolor = \"gamma:0\"",
+        ));
+        assert!(
+            m.contains("photo[0].color: gamma must be finite and positive"),
+            "{m}"
+        );
+        let m = error_of(&example_with(
+            "name = \"copper-a03\"",
+            "name = \"copper-a03\"\nname2 = [1, ",
+        ));
         // The example starts with a blank line; the unclosed array runs into line 4.
-        assert!(m.contains("capture.toml: line 4: unexpected `=` in array"), "{m}");
+        assert!(
+            m.contains("capture.toml: line 4: unexpected `=` in array"),
+            "{m}"
+        );
     }
 
     #[test]
     fn geometry_below_the_sample_and_degenerate_cameras_are_errors() {
-        let m = error_of(&example_with("position = [0.0, 0.0, 30.0]", "position = [0.0, 0.0, 0.0]"));
-        assert!(m.contains("camera.position: must be above the sample plane"), "{m}");
-        let m = error_of(&example_with("[0.0, 0.0, 30.0], intensity", "[0.0, 0.0, -1.0], intensity"));
-        assert!(m.contains("photo[0].light.position: must be above the sample plane"), "{m}");
-        let m = error_of(&example_with("look_at = [0.0, 0.0, 0.0]", "look_at = [0.0, 0.0, 30.0]"));
-        assert!(m.contains("camera.look_at: equals the camera position"), "{m}");
-        let m = error_of(&example_with("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, -2.0]"));
+        let m = error_of(&example_with(
+            "position = [0.0, 0.0, 30.0]",
+            "position = [0.0, 0.0, 0.0]",
+        ));
+        assert!(
+            m.contains("camera.position: must be above the sample plane"),
+            "{m}"
+        );
+        let m = error_of(&example_with(
+            "[0.0, 0.0, 30.0], intensity",
+            "[0.0, 0.0, -1.0], intensity",
+        ));
+        assert!(
+            m.contains("photo[0].light.position: must be above the sample plane"),
+            "{m}"
+        );
+        let m = error_of(&example_with(
+            "look_at = [0.0, 0.0, 0.0]",
+            "look_at = [0.0, 0.0, 30.0]",
+        ));
+        assert!(
+            m.contains("camera.look_at: equals the camera position"),
+            "{m}"
+        );
+        let m = error_of(&example_with(
+            "up = [0.0, 1.0, 0.0]",
+            "up = [0.0, 0.0, -2.0]",
+        ));
         assert!(m.contains("camera.up: is zero or parallel"), "{m}");
         // A photo's override that makes the camera degenerate is blamed on the override.
-        let text = example_with("exposure = 1.0", "exposure = 1.0\ncamera = { up = [0.0, 0.0, 1.0] }");
+        let text = example_with(
+            "exposure = 1.0",
+            "exposure = 1.0\ncamera = { up = [0.0, 0.0, 1.0] }",
+        );
         let m = error_of(&text);
         assert!(m.contains("photo[0].camera.up: is zero or parallel"), "{m}");
     }
@@ -597,20 +817,76 @@ camera = { model = "rectified", resolution = [32, 16] }
     #[test]
     fn non_positive_sizes_and_bad_intensities_are_errors() {
         for (from, to, expected) in [
-            ("resolution = [128, 128]", "resolution = [0, 128]", "camera.resolution: must be positive"),
-            ("resolution = [128, 128]", "resolution = [-1, 128]", "camera.resolution: invalid value"),
-            ("fov_y_deg = 30.0", "fov_y_deg = 0.0", "camera.fov_y_deg: must be between 0 and 180"),
-            ("fov_y_deg = 30.0", "fov_y_deg = 180.0", "camera.fov_y_deg: must be between 0 and 180"),
-            ("fov_y_deg = 30.0", "fx = -5.0\nfy = 5.0", "camera.fx: must be finite and positive"),
-            ("fov_y_deg = 30.0", "fov_y_deg = 30.0\nfx = 5.0", "camera.fov_y_deg: give either"),
-            ("width = 10.0", "width = 0.0", "sample.width: must be finite and positive"),
-            ("height = 10.0", "height = -3.0", "sample.height: must be finite and positive"),
-            ("exposure = 1.0", "exposure = 0.0", "photo[0].exposure: must be finite and positive"),
-            ("[1000.0, 1000.0, 1000.0]", "[1000.0, -1.0, 1000.0]", "photo[0].light.intensity: must be finite and non-negative"),
-            ("[1000.0, 1000.0, 1000.0]", "[0.0, 0.0, 0.0]", "photo[0].light.intensity: is zero in every channel"),
-            ("kind = \"point\"", "kind = \"spot\"", "photo[0].light.kind: unknown light kind `spot`"),
-            ("model = \"pinhole\"", "model = \"fisheye\"", "camera.model: unknown camera model `fisheye`"),
-            ("image = \"000.exr\"", "image = \"\"", "photo[0].image: must not be empty"),
+            (
+                "resolution = [128, 128]",
+                "resolution = [0, 128]",
+                "camera.resolution: must be positive",
+            ),
+            (
+                "resolution = [128, 128]",
+                "resolution = [-1, 128]",
+                "camera.resolution: invalid value",
+            ),
+            (
+                "fov_y_deg = 30.0",
+                "fov_y_deg = 0.0",
+                "camera.fov_y_deg: must be between 0 and 180",
+            ),
+            (
+                "fov_y_deg = 30.0",
+                "fov_y_deg = 180.0",
+                "camera.fov_y_deg: must be between 0 and 180",
+            ),
+            (
+                "fov_y_deg = 30.0",
+                "fx = -5.0\nfy = 5.0",
+                "camera.fx: must be finite and positive",
+            ),
+            (
+                "fov_y_deg = 30.0",
+                "fov_y_deg = 30.0\nfx = 5.0",
+                "camera.fov_y_deg: give either",
+            ),
+            (
+                "width = 10.0",
+                "width = 0.0",
+                "sample.width: must be finite and positive",
+            ),
+            (
+                "height = 10.0",
+                "height = -3.0",
+                "sample.height: must be finite and positive",
+            ),
+            (
+                "exposure = 1.0",
+                "exposure = 0.0",
+                "photo[0].exposure: must be finite and positive",
+            ),
+            (
+                "[1000.0, 1000.0, 1000.0]",
+                "[1000.0, -1.0, 1000.0]",
+                "photo[0].light.intensity: must be finite and non-negative",
+            ),
+            (
+                "[1000.0, 1000.0, 1000.0]",
+                "[0.0, 0.0, 0.0]",
+                "photo[0].light.intensity: is zero in every channel",
+            ),
+            (
+                "kind = \"point\"",
+                "kind = \"spot\"",
+                "photo[0].light.kind: unknown light kind `spot`",
+            ),
+            (
+                "model = \"pinhole\"",
+                "model = \"fisheye\"",
+                "camera.model: unknown camera model `fisheye`",
+            ),
+            (
+                "image = \"000.exr\"",
+                "image = \"\"",
+                "photo[0].image: must not be empty",
+            ),
         ] {
             let m = error_of(&example_with(from, to));
             assert!(m.contains(expected), "{to}: {m}");
@@ -621,18 +897,32 @@ camera = { model = "rectified", resolution = [32, 16] }
     fn duplicate_image_stems_are_errors() {
         let text = format!("{DESIGN_EXAMPLE}[[photo]]\nimage = \"other/000.png\"\nlight = {{ kind = \"flash\", intensity = [1.0, 1.0, 1.0] }}\n");
         let m = error_of(&text);
-        assert!(m.contains("photo[1].image: has the same file stem `000` as photo[0]"), "{m}");
+        assert!(
+            m.contains("photo[1].image: has the same file stem `000` as photo[0]"),
+            "{m}"
+        );
     }
 
     #[test]
     fn unknown_keys_are_warnings() {
-        let text = example_with("exposure = 1.0", "exposure = 1.0\nshutter = 3\ncamera = { lens = \"50mm\" }")
-            .replace("[sample]", "author = \"me\"\n[sample]")
-            .replace("kind = \"point\"", "kind = \"point\", colour = 2");
+        let text = example_with(
+            "exposure = 1.0",
+            "exposure = 1.0\nshutter = 3\ncamera = { lens = \"50mm\" }",
+        )
+        .replace("[sample]", "author = \"me\"\n[sample]")
+        .replace("kind = \"point\"", "kind = \"point\", colour = 2");
         let c = open_text(&text).unwrap();
         let joined = c.warnings.join("\n");
-        for key in ["author", "photo[0].shutter", "photo[0].camera.lens", "photo[0].light.colour"] {
-            assert!(joined.contains(&format!(": {key}: unknown key, ignored")), "{key}: {joined}");
+        for key in [
+            "author",
+            "photo[0].shutter",
+            "photo[0].camera.lens",
+            "photo[0].light.colour",
+        ] {
+            assert!(
+                joined.contains(&format!(": {key}: unknown key, ignored")),
+                "{key}: {joined}"
+            );
         }
         assert_eq!(c.warnings.len(), 4, "{joined}");
         // Pinhole keys written beside model = "rectified" are reported once, inherited ones not.
@@ -642,7 +932,12 @@ camera = { model = "rectified", resolution = [32, 16] }
         let expected: Vec<&str> = vec!["camera.look_at", "camera.up", "camera.fov_y_deg"];
         assert_eq!(c.warnings.len(), expected.len(), "{:?}", c.warnings);
         for (warning, key) in c.warnings.iter().zip(expected) {
-            assert!(warning.ends_with(&format!("{key}: not used by the rectified camera model, ignored")), "{warning}");
+            assert!(
+                warning.ends_with(&format!(
+                    "{key}: not used by the rectified camera model, ignored"
+                )),
+                "{warning}"
+            );
         }
     }
 
@@ -675,7 +970,12 @@ camera = { model = "rectified", resolution = [40, 20] }
         let saved = dir.path().join("again.toml");
         original.save_manifest(&saved).unwrap();
         let back = Capture::open(&saved).unwrap();
-        assert_eq!(back, original, "{}", std::fs::read_to_string(&saved).unwrap());
+        assert_eq!(
+            back,
+            original,
+            "{}",
+            std::fs::read_to_string(&saved).unwrap()
+        );
         // Relative paths are kept when the manifest stays in the capture's folder.
         let text = std::fs::read_to_string(&saved).unwrap();
         assert!(text.contains("\"sub/001_mask.png\""), "{text}");
@@ -692,8 +992,14 @@ camera = { model = "rectified", resolution = [40, 20] }
         assert_eq!(back.root, std::path::absolute(elsewhere.path()).unwrap());
         for (a, b) in original.photos.iter().zip(&back.photos) {
             assert_eq!(original.path_of(&a.image), back.path_of(&b.image));
-            assert_eq!(a.mask.as_ref().map(|m| original.path_of(m)), b.mask.as_ref().map(|m| back.path_of(m)));
-            assert_eq!((&a.camera, &a.light, a.exposure, a.color), (&b.camera, &b.light, b.exposure, b.color));
+            assert_eq!(
+                a.mask.as_ref().map(|m| original.path_of(m)),
+                b.mask.as_ref().map(|m| back.path_of(m))
+            );
+            assert_eq!(
+                (&a.camera, &a.light, a.exposure, a.color),
+                (&b.camera, &b.light, b.exposure, b.color)
+            );
         }
     }
 
@@ -701,7 +1007,10 @@ camera = { model = "rectified", resolution = [40, 20] }
     fn a_folder_without_manifest_is_an_error_saying_what_was_expected() {
         let dir = tempfile::tempdir().unwrap();
         let m = Capture::open(dir.path()).unwrap_err().to_string();
-        assert!(m.contains(&dir.path().display().to_string()) && m.contains("expected a capture.toml"), "{m}");
+        assert!(
+            m.contains(&dir.path().display().to_string()) && m.contains("expected a capture.toml"),
+            "{m}"
+        );
         let missing = dir.path().join("nothing-here");
         let m = Capture::open(&missing).unwrap_err().to_string();
         assert!(m.contains("nothing-here"), "{m}");

@@ -35,7 +35,9 @@ pub const ENCODING: ColorEncoding = ColorEncoding::Gamma(2.2);
 
 /// Whether `folder` holds MaterialGAN calibration ([`METADATA_FILES`]).
 pub fn is_materialgan_folder(folder: &Path) -> bool {
-    METADATA_FILES.iter().any(|name| folder.join(name).is_file())
+    METADATA_FILES
+        .iter()
+        .any(|name| folder.join(name).is_file())
 }
 
 /// Imports the MaterialGAN folder `folder`. `image_folder` names the subfolder with the images
@@ -52,7 +54,11 @@ pub fn import(folder: &Path, image_folder: Option<&str>) -> Result<Capture> {
         },
     };
     if indices.is_empty() {
-        return Err(Error::invalid(folder.join(&images), "images", "no 00.png found"));
+        return Err(Error::invalid(
+            folder.join(&images),
+            "images",
+            "no 00.png found",
+        ));
     }
     let photos = indices
         .iter()
@@ -64,28 +70,43 @@ pub fn import(folder: &Path, image_folder: Option<&str>) -> Result<Capture> {
             let light = if light_position == camera_position {
                 Light::Flash { intensity }
             } else {
-                Light::Point { position: light_position, intensity }
+                Light::Point {
+                    position: light_position,
+                    intensity,
+                }
             };
             let resolution = image_resolution(&folder.join(&image))?;
             let saturated_mask = images.join(format!("{index:02}_saturated_mask.png"));
             Ok(Photo {
-                camera: Camera::Rectified(Rectified { position: camera_position, resolution }),
+                camera: Camera::Rectified(Rectified {
+                    position: camera_position,
+                    resolution,
+                }),
                 light,
                 exposure: 1.0,
                 mask: None,
-                saturated_mask: folder.join(&saturated_mask).is_file().then_some(saturated_mask),
+                saturated_mask: folder
+                    .join(&saturated_mask)
+                    .is_file()
+                    .then_some(saturated_mask),
                 color: ENCODING,
                 image,
             })
         })
         .collect::<Result<Vec<Photo>>>()?;
     let root = absolute_folder(folder)?;
-    let name = root.file_name().map_or_else(|| "materialgan".to_string(), |n| n.to_string_lossy().into_owned());
+    let name = root.file_name().map_or_else(
+        || "materialgan".to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
     Ok(Capture {
         name,
         units: "cm".to_string(),
         root,
-        sample: Sample { width: metadata.size, height: metadata.size },
+        sample: Sample {
+            width: metadata.size,
+            height: metadata.size,
+        },
         color: Some(ENCODING),
         photos,
         warnings: metadata.warnings,
@@ -109,7 +130,10 @@ impl<T> PerImage<T> {
                 Error::invalid(
                     &self.file,
                     &self.field,
-                    format!("has {} entries, but image {index:02}.png needs entry {index}", values.len()),
+                    format!(
+                        "has {} entries, but image {index:02}.png needs entry {index}",
+                        values.len()
+                    ),
                 )
             }),
         }
@@ -130,12 +154,23 @@ struct Metadata {
 
 impl Metadata {
     fn read(folder: &Path) -> Result<Metadata> {
-        let present: Vec<&str> = METADATA_FILES.iter().copied().filter(|n| folder.join(n).is_file()).collect();
+        let present: Vec<&str> = METADATA_FILES
+            .iter()
+            .copied()
+            .filter(|n| folder.join(n).is_file())
+            .collect();
         let Some(&chosen) = present.first() else {
-            return Err(Error::invalid(folder, "folder", format!("none of {} found", METADATA_FILES.join(", "))));
+            return Err(Error::invalid(
+                folder,
+                "folder",
+                format!("none of {} found", METADATA_FILES.join(", ")),
+            ));
         };
-        let mut metadata =
-            if chosen == "camera_pos.txt" { Metadata::from_text(folder)? } else { Metadata::from_json(&folder.join(chosen))? };
+        let mut metadata = if chosen == "camera_pos.txt" {
+            Metadata::from_text(folder)?
+        } else {
+            Metadata::from_json(&folder.join(chosen))?
+        };
         if present.len() > 1 {
             metadata.warnings.push(format!(
                 "{}: calibration read from {chosen}; {} ignored",
@@ -147,7 +182,11 @@ impl Metadata {
     }
 
     fn longest_list(&self) -> usize {
-        self.camera.values.len().max(self.light.values.len()).max(self.power.values.len())
+        self.camera
+            .values
+            .len()
+            .max(self.light.values.len())
+            .max(self.power.values.len())
     }
 
     /// The `.txt` form: one value per line.
@@ -155,7 +194,11 @@ impl Metadata {
         let size_file = folder.join("image_size.txt");
         let sizes = read_text_rows(&size_file, |[side]: [f64; 1]| checks::positive(side))?;
         if sizes.values.len() != 1 {
-            return Err(Error::invalid(&size_file, "lines", format!("expected one number, found {} lines", sizes.values.len())));
+            return Err(Error::invalid(
+                &size_file,
+                "lines",
+                format!("expected one number, found {} lines", sizes.values.len()),
+            ));
         }
         Ok(Metadata {
             camera: read_text_rows(&folder.join("camera_pos.txt"), checks::above_sample_plane)?,
@@ -170,11 +213,21 @@ impl Metadata {
     /// The JSON form (`parameters.json`, `optim.json`).
     fn from_json(path: &Path) -> Result<Metadata> {
         let text = fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let json: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("line {}", e.line()), e.to_string()))?;
-        let object = json.as_object().ok_or_else(|| Error::invalid(path, "top level", "expected a JSON object"))?;
-        let field = |key: &str| object.get(key).ok_or_else(|| Error::invalid(path, key, "missing"));
-        let size_key = if object.contains_key("image_size") { "image_size" } else { "im_size" };
+        let json: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| Error::invalid(path, format!("line {}", e.line()), e.to_string()))?;
+        let object = json
+            .as_object()
+            .ok_or_else(|| Error::invalid(path, "top level", "expected a JSON object"))?;
+        let field = |key: &str| {
+            object
+                .get(key)
+                .ok_or_else(|| Error::invalid(path, key, "missing"))
+        };
+        let size_key = if object.contains_key("image_size") {
+            "image_size"
+        } else {
+            "im_size"
+        };
         let size = serde_json::from_value::<f64>(field(size_key)?.clone())
             .map_err(|e| e.to_string())
             .and_then(checks::positive)
@@ -185,8 +238,18 @@ impl Metadata {
             .transpose()
             .map_err(|e| Error::invalid(path, "idx", e.to_string()))?;
         Ok(Metadata {
-            camera: json_rows(path, "camera_pos", field("camera_pos")?, checks::above_sample_plane)?,
-            light: json_rows(path, "light_pos", field("light_pos")?, checks::above_sample_plane)?,
+            camera: json_rows(
+                path,
+                "camera_pos",
+                field("camera_pos")?,
+                checks::above_sample_plane,
+            )?,
+            light: json_rows(
+                path,
+                "light_pos",
+                field("light_pos")?,
+                checks::above_sample_plane,
+            )?,
             power: json_rows(path, "light_pow", field("light_pow")?, checks::light_power)?,
             size,
             indices,
@@ -210,7 +273,10 @@ fn read_text_rows<const N: usize, T>(
             let numbers = line
                 .split(|c: char| c == ',' || c.is_whitespace())
                 .filter(|s| !s.is_empty())
-                .map(|s| s.parse::<f64>().map_err(|_| error(format!("`{s}` is not a number"))))
+                .map(|s| {
+                    s.parse::<f64>()
+                        .map_err(|_| error(format!("`{s}` is not a number")))
+                })
                 .collect::<Result<Vec<f64>>>()?;
             let row: [f64; N] = numbers
                 .try_into()
@@ -221,7 +287,11 @@ fn read_text_rows<const N: usize, T>(
     if values.is_empty() {
         return Err(Error::invalid(path, "lines", "no values"));
     }
-    Ok(PerImage { file: path.to_path_buf(), field: "lines".to_string(), values })
+    Ok(PerImage {
+        file: path.to_path_buf(),
+        field: "lines".to_string(),
+        values,
+    })
 }
 
 /// A JSON value that is either one `[x, y, z]` triple or a list of them.
@@ -234,7 +304,11 @@ fn json_rows<T>(
     let rows = match serde_json::from_value::<[f64; 3]>(value.clone()) {
         Ok(single) => vec![single],
         Err(_) => serde_json::from_value::<Vec<[f64; 3]>>(value.clone()).map_err(|e| {
-            Error::invalid(path, key, format!("expected [x, y, z] or a list of them: {e}"))
+            Error::invalid(
+                path,
+                key,
+                format!("expected [x, y, z] or a list of them: {e}"),
+            )
         })?,
     };
     if rows.is_empty() {
@@ -245,7 +319,11 @@ fn json_rows<T>(
         .enumerate()
         .map(|(i, row)| check(row).map_err(|m| Error::invalid(path, format!("{key}[{i}]"), m)))
         .collect::<Result<Vec<T>>>()?;
-    Ok(PerImage { file: path.to_path_buf(), field: key.to_string(), values })
+    Ok(PerImage {
+        file: path.to_path_buf(),
+        field: key.to_string(),
+        values,
+    })
 }
 
 /// The image subfolder (relative to `folder`; empty for the folder itself).
@@ -254,7 +332,11 @@ fn choose_image_folder(folder: &Path, choice: Option<&str>) -> Result<PathBuf> {
         return if folder.join(name).is_dir() {
             Ok(PathBuf::from(name))
         } else {
-            Err(Error::invalid(folder, "image folder", format!("has no subfolder `{name}`")))
+            Err(Error::invalid(
+                folder,
+                "image folder",
+                format!("has no subfolder `{name}`"),
+            ))
         };
     }
     let entries = fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
@@ -268,12 +350,17 @@ fn choose_image_folder(folder: &Path, choice: Option<&str>) -> Result<PathBuf> {
             }
         }
     }
-    Ok(numeric.into_iter().min().map_or_else(PathBuf::new, |(_, name)| PathBuf::from(name)))
+    Ok(numeric
+        .into_iter()
+        .min()
+        .map_or_else(PathBuf::new, |(_, name)| PathBuf::from(name)))
 }
 
 /// How many consecutive images `00.png`, `01.png`, ... the image folder holds.
 fn count_images(folder: &Path, images: &Path) -> usize {
-    (0..).take_while(|i| folder.join(images).join(format!("{i:02}.png")).is_file()).count()
+    (0..)
+        .take_while(|i| folder.join(images).join(format!("{i:02}.png")).is_file())
+        .count()
 }
 
 /// `[width, height]` of an image, read from its header.
@@ -291,7 +378,9 @@ mod tests {
 
     fn write_png(path: &Path, size: u32, value: u8) {
         fs::create_dir_all(path.parent().unwrap()).unwrap();
-        image::RgbImage::from_pixel(size, size, image::Rgb([value; 3])).save(path).unwrap();
+        image::RgbImage::from_pixel(size, size, image::Rgb([value; 3]))
+            .save(path)
+            .unwrap();
     }
 
     /// A `.txt`-form folder: 3 images at 4 px in `4/` and 8 px in `8/`, a non-numeric folder,
@@ -299,8 +388,16 @@ mod tests {
     fn text_folder() -> tempfile::TempDir {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
-        fs::write(d.join("camera_pos.txt"), "1.0,0.5,16.0\n-2.0, 1.5, 17.5\n\n0,0,20\n").unwrap();
-        fs::write(d.join("light_pos.txt"), "1.0,0.5,16.0\n-2.0,1.5,17.5\n3,1,20\n").unwrap();
+        fs::write(
+            d.join("camera_pos.txt"),
+            "1.0,0.5,16.0\n-2.0, 1.5, 17.5\n\n0,0,20\n",
+        )
+        .unwrap();
+        fs::write(
+            d.join("light_pos.txt"),
+            "1.0,0.5,16.0\n-2.0,1.5,17.5\n3,1,20\n",
+        )
+        .unwrap();
         fs::write(d.join("light_power.txt"), "1500.0000,1500.0000,1400.0000\n").unwrap();
         fs::write(d.join("image_size.txt"), "6.8480\n").unwrap();
         for i in 0..3 {
@@ -317,24 +414,49 @@ mod tests {
         let dir = text_folder();
         let c = import(dir.path(), None).unwrap();
         assert_eq!(c.units, "cm");
-        assert_eq!(c.sample, Sample { width: 6.848, height: 6.848 });
+        assert_eq!(
+            c.sample,
+            Sample {
+                width: 6.848,
+                height: 6.848
+            }
+        );
         assert_eq!(c.color, Some(ColorEncoding::Gamma(2.2)));
         assert_eq!(c.root, std::path::absolute(dir.path()).unwrap());
         assert!(c.warnings.is_empty());
         assert_eq!(c.photos.len(), 3);
-        let cameras = [DVec3::new(1.0, 0.5, 16.0), DVec3::new(-2.0, 1.5, 17.5), DVec3::new(0.0, 0.0, 20.0)];
+        let cameras = [
+            DVec3::new(1.0, 0.5, 16.0),
+            DVec3::new(-2.0, 1.5, 17.5),
+            DVec3::new(0.0, 0.0, 20.0),
+        ];
         for (i, (photo, position)) in c.photos.iter().zip(cameras).enumerate() {
             assert_eq!(photo.image, PathBuf::from(format!("4/{i:02}.png")));
-            assert_eq!(photo.camera, Camera::Rectified(Rectified { position, resolution: [4, 4] }));
+            assert_eq!(
+                photo.camera,
+                Camera::Rectified(Rectified {
+                    position,
+                    resolution: [4, 4]
+                })
+            );
             assert_eq!(photo.color, ColorEncoding::Gamma(2.2));
             assert_eq!(photo.exposure, 1.0);
         }
         let intensity = [1500.0, 1500.0, 1400.0];
         assert_eq!(c.photos[0].light, Light::Flash { intensity });
         assert_eq!(c.photos[1].light, Light::Flash { intensity });
-        assert_eq!(c.photos[2].light, Light::Point { position: DVec3::new(3.0, 1.0, 20.0), intensity });
+        assert_eq!(
+            c.photos[2].light,
+            Light::Point {
+                position: DVec3::new(3.0, 1.0, 20.0),
+                intensity
+            }
+        );
         let masks: Vec<_> = c.photos.iter().map(|p| p.saturated_mask.clone()).collect();
-        assert_eq!(masks, vec![None, Some(PathBuf::from("4/01_saturated_mask.png")), None]);
+        assert_eq!(
+            masks,
+            vec![None, Some(PathBuf::from("4/01_saturated_mask.png")), None]
+        );
         // Opening the folder imports it the same way.
         assert_eq!(Capture::open(dir.path()).unwrap(), c);
     }
@@ -365,8 +487,19 @@ mod tests {
         assert_eq!(c.sample.width, 10.88);
         assert_eq!(c.photos.len(), 2);
         assert_eq!(c.photos[1].image, PathBuf::from("02.png"));
-        assert_eq!(c.photos[1].camera, Camera::Rectified(Rectified { position: DVec3::new(4.8, 4.9, 24.5), resolution: [5, 5] }));
-        assert_eq!(c.photos[1].light, Light::Flash { intensity: [1500.0; 3] });
+        assert_eq!(
+            c.photos[1].camera,
+            Camera::Rectified(Rectified {
+                position: DVec3::new(4.8, 4.9, 24.5),
+                resolution: [5, 5]
+            })
+        );
+        assert_eq!(
+            c.photos[1].light,
+            Light::Flash {
+                intensity: [1500.0; 3]
+            }
+        );
     }
 
     #[test]
@@ -383,7 +516,13 @@ mod tests {
         let c = import(d, None).unwrap();
         assert_eq!(c.photos.len(), 2);
         assert_eq!(c.sample.height, 9.728);
-        assert_eq!(c.photos[1].light, Light::Point { position: DVec3::new(1.8, 0.1, 11.0), intensity: [1500.0, 1400.0, 1300.0] });
+        assert_eq!(
+            c.photos[1].light,
+            Light::Point {
+                position: DVec3::new(1.8, 0.1, 11.0),
+                intensity: [1500.0, 1400.0, 1300.0]
+            }
+        );
         assert_eq!(c.warnings.len(), 1);
         assert!(c.warnings[0].contains("calibration read from parameters.json; optim.json ignored"));
     }
@@ -394,24 +533,39 @@ mod tests {
         let d = dir.path();
         fs::write(d.join("camera_pos.txt"), "1.0,0.5,16.0\n1.0,0.5\n").unwrap();
         let m = import(d, None).unwrap_err().to_string();
-        assert!(m.contains("camera_pos.txt: line 2: expected 3 numbers, found 2"), "{m}");
+        assert!(
+            m.contains("camera_pos.txt: line 2: expected 3 numbers, found 2"),
+            "{m}"
+        );
         fs::write(d.join("camera_pos.txt"), "1.0,0.5,16.0\n1.0,0.5,-3\n").unwrap();
         let m = import(d, None).unwrap_err().to_string();
-        assert!(m.contains("camera_pos.txt: line 2: must be above the sample plane"), "{m}");
+        assert!(
+            m.contains("camera_pos.txt: line 2: must be above the sample plane"),
+            "{m}"
+        );
         fs::write(d.join("camera_pos.txt"), "1.0,0.5,16.0\n1.0,abc,3\n").unwrap();
         let m = import(d, None).unwrap_err().to_string();
-        assert!(m.contains("camera_pos.txt: line 2: `abc` is not a number"), "{m}");
+        assert!(
+            m.contains("camera_pos.txt: line 2: `abc` is not a number"),
+            "{m}"
+        );
         // Two camera lines but three light lines: image 02 has no camera.
         fs::write(d.join("camera_pos.txt"), "1.0,0.5,16.0\n1.0,0.5,3\n").unwrap();
         let m = import(d, None).unwrap_err().to_string();
-        assert!(m.contains("camera_pos.txt: lines: has 2 entries, but image 02.png needs entry 2"), "{m}");
+        assert!(
+            m.contains("camera_pos.txt: lines: has 2 entries, but image 02.png needs entry 2"),
+            "{m}"
+        );
         fs::remove_file(d.join("image_size.txt")).unwrap();
         let m = import(d, None).unwrap_err().to_string();
         assert!(m.contains("image_size.txt"), "{m}");
         let json_dir = tempfile::tempdir().unwrap();
         fs::write(json_dir.path().join("parameters.json"), r#"{"image_size": 9, "camera_pos": [[1, 2, 3]], "light_pos": [1, 2], "light_pow": [1, 1, 1]}"#).unwrap();
         let m = import(json_dir.path(), None).unwrap_err().to_string();
-        assert!(m.contains("parameters.json: light_pos: expected [x, y, z] or a list of them"), "{m}");
+        assert!(
+            m.contains("parameters.json: light_pos: expected [x, y, z] or a list of them"),
+            "{m}"
+        );
     }
 
     #[test]
@@ -437,7 +591,10 @@ mod tests {
                 a.saturated_mask.as_ref().map(|m| c.path_of(m)),
                 b.saturated_mask.as_ref().map(|m| back.path_of(m))
             );
-            assert_eq!((&a.camera, &a.light, a.color), (&b.camera, &b.light, b.color));
+            assert_eq!(
+                (&a.camera, &a.light, a.color),
+                (&b.camera, &b.light, b.color)
+            );
         }
     }
 
@@ -448,16 +605,34 @@ mod tests {
         if !real.is_dir() {
             return;
         }
-        for (set, side) in [("real_cards-blue", 6.848), ("bath_tile", 9.728), ("yellow_box", 10.88)] {
+        for (set, side) in [
+            ("real_cards-blue", 6.848),
+            ("bath_tile", 9.728),
+            ("yellow_box", 10.88),
+        ] {
             let c = Capture::open(&real.join(set)).unwrap();
             assert_eq!(c.photos.len(), 9, "{set}");
-            assert!((c.sample.width - side).abs() < 1e-12 && c.sample.height == c.sample.width, "{set}");
+            assert!(
+                (c.sample.width - side).abs() < 1e-12 && c.sample.height == c.sample.width,
+                "{set}"
+            );
             for (i, p) in c.photos.iter().enumerate() {
                 assert_eq!(p.image, PathBuf::from(format!("256/{i:02}.png")), "{set}");
                 assert_eq!(p.camera.resolution(), [256, 256], "{set}");
-                assert!(matches!(p.light, Light::Flash { intensity: [1500.0, 1500.0, 1500.0] }), "{set}");
+                assert!(
+                    matches!(
+                        p.light,
+                        Light::Flash {
+                            intensity: [1500.0, 1500.0, 1500.0]
+                        }
+                    ),
+                    "{set}"
+                );
                 assert!(p.saturated_mask.is_some(), "{set}");
-                assert!(p.camera.position().z > 10.0 && p.camera.position().z < 30.0, "{set}");
+                assert!(
+                    p.camera.position().z > 10.0 && p.camera.position().z < 30.0,
+                    "{set}"
+                );
             }
         }
     }

@@ -31,7 +31,9 @@ pub const MANIFEST_NAME: &str = "capture.toml";
 /// plane z = 0, `width` along x, `height` along y.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Sample {
+    /// Extent along x.
     pub width: f64,
+    /// Extent along y.
     pub height: f64,
 }
 
@@ -49,6 +51,7 @@ pub struct Photo {
     pub image: PathBuf,
     /// The manifest's `[camera]` with this photo's overrides applied.
     pub camera: Camera,
+    /// The photo's light.
     pub light: Light,
     /// Gain that multiplies the prediction (PHYSICS.md "Conventions"); default 1.
     pub exposure: f64,
@@ -67,21 +70,27 @@ impl Photo {
     /// The image's file stem (`000` for `000.exr`), which names this photo's rendered outputs
     /// (DESIGN.md "Command-line contract", `render`). Unique within a capture.
     pub fn stem(&self) -> String {
-        self.image.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+        self.image
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
     }
 }
 
 /// A photo set: the manifest (`capture.toml`) or an imported folder, fully resolved.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Capture {
+    /// Name of the photo set (the manifest's `name`, an imported folder's name).
     pub name: String,
     /// Unit of every length (sample size, positions); light intensities are per this unit.
     pub units: String,
     /// Folder that relative image and mask paths are resolved against (the manifest's folder).
     pub root: PathBuf,
+    /// The flat sample's rectangle.
     pub sample: Sample,
     /// The manifest's top-level `color`: the default encoding of every photo, if given.
     pub color: Option<ColorEncoding>,
+    /// The photos, in manifest order.
     pub photos: Vec<Photo>,
     /// Things worth telling the user that are not errors (unknown manifest keys, ignored
     /// fields). Not written by [`Capture::save_manifest`].
