@@ -129,6 +129,7 @@ impl ShadingRecords {
             samples_per_pixel: pixel_samples,
             ..ShadingRecords::default()
         };
+        records.reserve(capture)?;
         for (index, photo) in capture.photos.iter().enumerate() {
             let [width, height] = photo.camera.resolution();
             let span = PhotoSpan {
@@ -144,6 +145,38 @@ impl ShadingRecords {
             records.photos.push(span);
         }
         Ok(records)
+    }
+
+    /// Reserves the arrays for every photo of `capture` at once (no regrowth while photos are
+    /// appended); a set too large for memory is an error rather than an abort.
+    fn reserve(&mut self, capture: &Capture) -> Result<()> {
+        let pixels = capture.photos.iter().try_fold(0usize, |sum, photo| {
+            let [width, height] = photo.camera.resolution();
+            width.checked_mul(height).and_then(|n| sum.checked_add(n))
+        });
+        let sub_samples = pixels.and_then(|n| n.checked_mul(self.samples_per_pixel));
+        let (Some(pixels), Some(sub_samples)) = (pixels, sub_samples) else {
+            return Err(Error::argument(
+                "pixel_samples",
+                "the photo set has too many pixels to count",
+            ));
+        };
+        let too_large = |_| {
+            Error::argument(
+                "pixel_samples",
+                format!(
+                    "{pixels} pixels x {} sub-samples do not fit in memory",
+                    self.samples_per_pixel
+                ),
+            )
+        };
+        for per_sub_sample in [&mut self.wi, &mut self.wo, &mut self.irradiance] {
+            per_sub_sample
+                .try_reserve_exact(sub_samples)
+                .map_err(too_large)?;
+        }
+        self.target.try_reserve_exact(pixels).map_err(too_large)?;
+        self.weight.try_reserve_exact(pixels).map_err(too_large)
     }
 
     /// Appends the sub-sample geometry of one photo, and its pixels with weight 1 where some
@@ -320,6 +353,26 @@ mod tests {
                     .samples_per_pixel,
                 good
             );
+        }
+    }
+
+    #[test]
+    fn absurd_resolutions_are_errors_not_aborts() {
+        let light = Light::Flash {
+            intensity: [1.0; 3],
+        };
+        let sample = Sample {
+            width: 1.0,
+            height: 1.0,
+        };
+        for (resolution, expected) in [
+            ([usize::MAX / 2, 4], "too many pixels to count"),
+            ([1 << 40, 1 << 20], "do not fit in memory"),
+        ] {
+            let p = photo("a.png", rectified(DVec3::Z, resolution), light.clone());
+            let c = capture(Path::new("."), sample, vec![p]);
+            let m = ShadingRecords::build(&c, 1, false).unwrap_err().to_string();
+            assert!(m.contains("pixel_samples") && m.contains(expected), "{m}");
         }
     }
 
