@@ -332,26 +332,27 @@ impl CameraFields {
 
 fn read_light(mut t: Table, warnings: &mut Vec<String>) -> Result<Light> {
     let kind: String = t.required("kind", Ok)?;
-    let light =
-        match kind.as_str() {
-            "point" => Light::Point {
-                position: t.required("position", checks::above_sample_plane)?,
-                intensity: t.required("intensity", checks::light_power)?,
-            },
-            "directional" => Light::Directional {
-                direction: t.required("direction", checks::above_sample_plane)?,
-                irradiance: t.required("irradiance", checks::light_power)?,
-            },
-            "flash" => Light::Flash {
-                intensity: t.required("intensity", checks::light_power)?,
-            },
-            _ => return Err(t.error(
+    let light = match kind.as_str() {
+        "point" => Light::Point {
+            position: t.required("position", checks::above_sample_plane)?,
+            intensity: t.required("intensity", checks::light_power)?,
+        },
+        "directional" => Light::Directional {
+            direction: t.required("direction", checks::above_sample_plane)?,
+            irradiance: t.required("irradiance", checks::light_power)?,
+        },
+        "flash" => Light::Flash {
+            intensity: t.required("intensity", checks::light_power)?,
+        },
+        _ => {
+            return Err(t.error(
                 "kind",
                 format!(
                     "unknown light kind `{kind}`; expected \"point\", \"directional\" or \"flash\""
                 ),
-            )),
-        };
+            ))
+        }
+    };
     t.finish(warnings);
     Ok(light)
 }
