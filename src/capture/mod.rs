@@ -12,6 +12,7 @@ pub mod image_io;
 pub mod light;
 mod manifest;
 pub mod materialgan;
+pub mod materialgan_writer;
 
 use std::fs;
 use std::path::{Path, PathBuf};

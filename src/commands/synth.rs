@@ -35,6 +35,16 @@ pub struct SynthArgs {
     /// Replace a non-empty output folder.
     #[arg(long)]
     pub force: bool,
+    /// Output format: `exr` (linear EXR + capture.toml) or `materialgan` (8-bit gamma-2.2 PNGs
+    /// clipped at 1, with camera_pos.txt, light_pos.txt, light_power.txt, image_size.txt).
+    #[arg(long, value_enum, default_value = "exr")]
+    pub format: SynthFormat,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SynthFormat {
+    Exr,
+    Materialgan,
 }
 
 #[derive(clap::Args, Debug)]
@@ -76,6 +86,12 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
     }
     let folder = StagedFolder::new(&args.output, args.force)?;
     let staging_root = folder.path("");
+    if args.format == SynthFormat::Materialgan {
+        crate::capture::materialgan_writer::write(&staging_root, &capture, &pixels)?;
+        folder.commit()?;
+        eprintln!("wrote {} MaterialGAN-format photos to {}", records.photos.len(), args.output.display());
+        return Ok(());
+    }
     write_photo_images(&staging_root, &records, &pixels, display_exposure(&pixels), "")?;
     let mut synthetic = capture.clone();
     synthetic.root = staging_root.clone();
