@@ -41,7 +41,11 @@ pub fn directional_albedo(brdf: &dyn Brdf, wi: Vec3<f64>, samples: usize, seed: 
     } else {
         let fine = midpoint_grid(brdf, wi, n, seed);
         let coarse = midpoint_grid(brdf, wi, n.div_ceil(2), seed);
-        Estimate { value: fine, stderr: [0, 1, 2].map(|c| (fine[c] - coarse[c]).abs()), samples: n * n }
+        Estimate {
+            value: fine,
+            stderr: [0, 1, 2].map(|c| (fine[c] - coarse[c]).abs()),
+            samples: n * n,
+        }
     }
 }
 
@@ -79,7 +83,10 @@ fn stratified_monte_carlo(brdf: &dyn Brdf, wi: Vec3<f64>, n: usize, seed: u64) -
             let mut rng = rng_stream(seed, j as u64);
             let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
             for i in 0..n {
-                let u = [(i as f64 + rng.random::<f64>()) / n as f64, (j as f64 + rng.random::<f64>()) / n as f64];
+                let u = [
+                    (i as f64 + rng.random::<f64>()) / n as f64,
+                    (j as f64 + rng.random::<f64>()) / n as f64,
+                ];
                 if let Some(s) = brdf.sample(wi, u, &mut rng) {
                     for c in 0..3 {
                         sum[c] += s.weight[c];
@@ -96,5 +103,9 @@ fn stratified_monte_carlo(brdf: &dyn Brdf, wi: Vec3<f64>, n: usize, seed: u64) -
         let m2 = rows.iter().map(|r| r.1[c]).sum::<f64>() / total;
         ((m2 - mean[c] * mean[c]).max(0.0) / (total - 1.0)).sqrt()
     });
-    Estimate { value: mean, stderr, samples: n * n }
+    Estimate {
+        value: mean,
+        stderr,
+        samples: n * n,
+    }
 }

@@ -11,7 +11,11 @@ pub enum Error {
     Io { path: PathBuf, message: String },
     /// A file was read but its content is wrong; `field` names the key, line or pixel.
     #[error("{path}: {field}: {message}")]
-    Invalid { path: PathBuf, field: String, message: String },
+    Invalid {
+        path: PathBuf,
+        field: String,
+        message: String,
+    },
     /// A command-line value is wrong (no file involved).
     #[error("{field}: {message}")]
     Argument { field: String, message: String },
@@ -19,13 +23,27 @@ pub enum Error {
 
 impl Error {
     pub fn io(path: impl Into<PathBuf>, err: impl std::fmt::Display) -> Self {
-        Error::Io { path: path.into(), message: err.to_string() }
+        Error::Io {
+            path: path.into(),
+            message: err.to_string(),
+        }
     }
-    pub fn invalid(path: impl Into<PathBuf>, field: impl Into<String>, message: impl Into<String>) -> Self {
-        Error::Invalid { path: path.into(), field: field.into(), message: message.into() }
+    pub fn invalid(
+        path: impl Into<PathBuf>,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
+        Error::Invalid {
+            path: path.into(),
+            field: field.into(),
+            message: message.into(),
+        }
     }
     pub fn argument(field: impl Into<String>, message: impl Into<String>) -> Self {
-        Error::Argument { field: field.into(), message: message.into() }
+        Error::Argument {
+            field: field.into(),
+            message: message.into(),
+        }
     }
 }
 

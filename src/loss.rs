@@ -30,8 +30,18 @@ pub struct Loss<'a> {
 impl<'a> Loss<'a> {
     pub fn new(kind: LossKind, target: &'a [[f64; 3]], weight: &'a [f64]) -> Self {
         let wsum: f64 = weight.iter().sum();
-        let mean = target.iter().zip(weight).map(|(t, w)| w * (t[0] + t[1] + t[2]) / 3.0).sum::<f64>() / wsum.max(f64::MIN_POSITIVE);
-        Loss { kind, target, weight, scale: mean.max(1e-12) }
+        let mean = target
+            .iter()
+            .zip(weight)
+            .map(|(t, w)| w * (t[0] + t[1] + t[2]) / 3.0)
+            .sum::<f64>()
+            / wsum.max(f64::MIN_POSITIVE);
+        Loss {
+            kind,
+            target,
+            weight,
+            scale: mean.max(1e-12),
+        }
     }
 
     /// Per-pixel loss of one prediction (summed over channels, unweighted).
@@ -40,7 +50,9 @@ impl<'a> Loss<'a> {
         (0..3)
             .map(|c| match self.kind {
                 LossKind::L2 => (predicted[c] - t[c]).powi(2),
-                LossKind::LogL1 => ((predicted[c] / self.scale).ln_1p() - (t[c].max(0.0) / self.scale).ln_1p()).abs(),
+                LossKind::LogL1 => ((predicted[c] / self.scale).ln_1p()
+                    - (t[c].max(0.0) / self.scale).ln_1p())
+                .abs(),
             })
             .sum()
     }

@@ -6,7 +6,11 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "bouncefit", version, about = "Fit single- and multi-bounce microfacet materials to photographs of flat samples")]
+#[command(
+    name = "bouncefit",
+    version,
+    about = "Fit single- and multi-bounce microfacet materials to photographs of flat samples"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -28,7 +28,11 @@ impl FresnelSpec {
     pub fn parse(text: &str) -> Result<Self> {
         let bad = |msg: &str| Error::argument("--fresnel", format!("'{text}': {msg}"));
         let triple = |s: &str| -> Result<[f64; 3]> {
-            let v: Vec<f64> = s.split(',').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| bad("expected numbers"))?;
+            let v: Vec<f64> = s
+                .split(',')
+                .map(|x| x.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| bad("expected numbers"))?;
             match v.as_slice() {
                 [x] => Ok([*x; 3]),
                 [r, g, b] => Ok([*r, *g, *b]),
@@ -52,9 +56,20 @@ impl FresnelSpec {
         let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
         match self {
             FresnelSpec::White => Ok(()),
-            FresnelSpec::Schlick { f0 } if finite(f0) && f0.iter().all(|&x| (0.0..=1.0).contains(&x)) => Ok(()),
+            FresnelSpec::Schlick { f0 }
+                if finite(f0) && f0.iter().all(|&x| (0.0..=1.0).contains(&x)) =>
+            {
+                Ok(())
+            }
             FresnelSpec::Schlick { .. } => Err("Schlick f0 must lie in [0, 1]".into()),
-            FresnelSpec::Conductor { eta, k } if finite(eta) && finite(k) && eta.iter().all(|&x| x > 0.0) && k.iter().all(|&x| x >= 0.0) => Ok(()),
+            FresnelSpec::Conductor { eta, k }
+                if finite(eta)
+                    && finite(k)
+                    && eta.iter().all(|&x| x > 0.0)
+                    && k.iter().all(|&x| x >= 0.0) =>
+            {
+                Ok(())
+            }
             FresnelSpec::Conductor { .. } => Err("conductor eta must be > 0 and k >= 0".into()),
             FresnelSpec::Dielectric { eta } if eta.is_finite() && *eta > 0.0 => Ok(()),
             FresnelSpec::Dielectric { .. } => Err("dielectric eta must be > 0".into()),
@@ -65,8 +80,13 @@ impl FresnelSpec {
     pub fn to_fresnel<T: Real>(&self) -> Fresnel<T> {
         match *self {
             FresnelSpec::White => Fresnel::White,
-            FresnelSpec::Schlick { f0 } => Fresnel::Schlick { f0: Rgb::from_f64(f0) },
-            FresnelSpec::Conductor { eta, k } => Fresnel::Conductor { eta: Rgb::from_f64(eta), k: Rgb::from_f64(k) },
+            FresnelSpec::Schlick { f0 } => Fresnel::Schlick {
+                f0: Rgb::from_f64(f0),
+            },
+            FresnelSpec::Conductor { eta, k } => Fresnel::Conductor {
+                eta: Rgb::from_f64(eta),
+                k: Rgb::from_f64(k),
+            },
             FresnelSpec::Dielectric { eta } => Fresnel::Dielectric { eta: T::c(eta) },
         }
     }
@@ -85,7 +105,9 @@ enum AlphaField {
     Anisotropic([f64; 2]),
 }
 
-fn deserialize_alpha<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<[f64; 2], D::Error> {
+fn deserialize_alpha<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<[f64; 2], D::Error> {
     Ok(match AlphaField::deserialize(d)? {
         AlphaField::Isotropic(a) => [a, a],
         AlphaField::Anisotropic(a) => a,
@@ -114,19 +136,39 @@ impl Material {
     /// Read and validate a material or fit file; errors name the file and the field.
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let material: Material = serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("line {} column {}", e.line(), e.column()), e.to_string()))?;
-        material.validate().map_err(|(field, msg)| Error::invalid(path, field, msg))?;
+        let material: Material = serde_json::from_str(&text).map_err(|e| {
+            Error::invalid(
+                path,
+                format!("line {} column {}", e.line(), e.column()),
+                e.to_string(),
+            )
+        })?;
+        material
+            .validate()
+            .map_err(|(field, msg)| Error::invalid(path, field, msg))?;
         Ok(material)
     }
 
     /// Check physical ranges; returns the offending field and the reason.
     pub fn validate(&self) -> std::result::Result<(), (String, String)> {
         if !self.alpha.iter().all(|a| a.is_finite() && *a > 0.0) {
-            return Err(("alpha".into(), format!("roughness must be finite and > 0, got {:?}", self.alpha)));
+            return Err((
+                "alpha".into(),
+                format!("roughness must be finite and > 0, got {:?}", self.alpha),
+            ));
         }
-        self.fresnel.validate().map_err(|m| ("fresnel".to_string(), m))?;
-        if !self.diffuse.iter().all(|d| d.is_finite() && (0.0..=1.0).contains(d)) {
-            return Err(("diffuse".into(), format!("albedo must lie in [0, 1], got {:?}", self.diffuse)));
+        self.fresnel
+            .validate()
+            .map_err(|m| ("fresnel".to_string(), m))?;
+        if !self
+            .diffuse
+            .iter()
+            .all(|d| d.is_finite() && (0.0..=1.0).contains(d))
+        {
+            return Err((
+                "diffuse".into(),
+                format!("albedo must lie in [0, 1], got {:?}", self.diffuse),
+            ));
         }
         Ok(())
     }
@@ -162,7 +204,9 @@ mod tests {
         assert_eq!(m.alpha, [0.3, 0.3]);
         let back: Material = serde_json::from_str(&serde_json::to_string(&m).unwrap()).unwrap();
         assert_eq!(m, back);
-        let iso: Material = serde_json::from_str(r#"{"model":"single","alpha":0.2,"fresnel":{"kind":"white"}}"#).unwrap();
+        let iso: Material =
+            serde_json::from_str(r#"{"model":"single","alpha":0.2,"fresnel":{"kind":"white"}}"#)
+                .unwrap();
         assert_eq!(iso.alpha, [0.2, 0.2]);
         assert_eq!(iso.ndf, NdfKind::Ggx);
     }
@@ -170,10 +214,31 @@ mod tests {
     #[test]
     fn cli_fresnel_syntax() {
         assert_eq!(FresnelSpec::parse("white").unwrap(), FresnelSpec::White);
-        assert_eq!(FresnelSpec::parse("schlick:0.9,0.6,0.3").unwrap(), FresnelSpec::Schlick { f0: [0.9, 0.6, 0.3] });
-        assert_eq!(FresnelSpec::parse("conductor:0.2,0.9,1.1:3.9,2.4,2.1").unwrap(), FresnelSpec::Conductor { eta: [0.2, 0.9, 1.1], k: [3.9, 2.4, 2.1] });
-        assert_eq!(FresnelSpec::parse("dielectric:1.5").unwrap(), FresnelSpec::Dielectric { eta: 1.5 });
-        for bad in ["gold", "schlick:1.2,0,0", "conductor:1,1,1", "dielectric:-1", "schlick:a,b,c", "conductor:0,1,1:1,1,1"] {
+        assert_eq!(
+            FresnelSpec::parse("schlick:0.9,0.6,0.3").unwrap(),
+            FresnelSpec::Schlick {
+                f0: [0.9, 0.6, 0.3]
+            }
+        );
+        assert_eq!(
+            FresnelSpec::parse("conductor:0.2,0.9,1.1:3.9,2.4,2.1").unwrap(),
+            FresnelSpec::Conductor {
+                eta: [0.2, 0.9, 1.1],
+                k: [3.9, 2.4, 2.1]
+            }
+        );
+        assert_eq!(
+            FresnelSpec::parse("dielectric:1.5").unwrap(),
+            FresnelSpec::Dielectric { eta: 1.5 }
+        );
+        for bad in [
+            "gold",
+            "schlick:1.2,0,0",
+            "conductor:1,1,1",
+            "dielectric:-1",
+            "schlick:a,b,c",
+            "conductor:0,1,1:1,1,1",
+        ] {
             assert!(FresnelSpec::parse(bad).is_err(), "{bad}");
         }
     }

@@ -19,11 +19,19 @@ impl Progress {
     pub fn new(label: &str, total: u64) -> Self {
         let bar = std::io::stderr().is_terminal().then(|| {
             let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
-            bar.set_style(ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {msg} ({elapsed})").expect("valid template").progress_chars("=> "));
+            bar.set_style(
+                ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
+                    .expect("valid template")
+                    .progress_chars("=> "),
+            );
             bar.set_prefix(label.to_string());
             bar
         });
-        Progress { bar, label: label.to_string(), last_plain: Instant::now() }
+        Progress {
+            bar,
+            label: label.to_string(),
+            last_plain: Instant::now(),
+        }
     }
 
     /// Report step `pos` with a short message (e.g. the current loss).

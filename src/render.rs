@@ -18,29 +18,42 @@ use std::f64::consts::FRAC_1_PI;
 const PIXELS_PER_TASK: usize = 1024;
 
 /// Predicted radiance of the pixels listed in `pixels` (indices into the per-pixel arrays).
-pub fn render_pixels(material: &Material, records: &ShadingRecords, pixels: &[usize], seed: u64) -> Vec<[f64; 3]> {
+pub fn render_pixels(
+    material: &Material,
+    records: &ShadingRecords,
+    pixels: &[usize],
+    seed: u64,
+) -> Vec<[f64; 3]> {
     let brdf = material.brdf();
     let brdf: &dyn Brdf = brdf.as_ref();
     let diffuse = material.diffuse.map(|d| d * FRAC_1_PI);
     let spp = records.samples_per_pixel;
     let mut out = vec![[0.0; 3]; pixels.len()];
-    out.par_chunks_mut(PIXELS_PER_TASK).zip(pixels.par_chunks(PIXELS_PER_TASK)).for_each(|(out, pixels)| {
-        for (value, &p) in out.iter_mut().zip(pixels) {
-            let mut rng = rng_stream(seed, p as u64);
-            let mut sum = [0.0; 3];
-            for s in p * spp..(p + 1) * spp {
-                let e = records.irradiance[s];
-                if e == [0.0; 3] {
-                    continue;
+    out.par_chunks_mut(PIXELS_PER_TASK)
+        .zip(pixels.par_chunks(PIXELS_PER_TASK))
+        .for_each(|(out, pixels)| {
+            for (value, &p) in out.iter_mut().zip(pixels) {
+                let mut rng = rng_stream(seed, p as u64);
+                let mut sum = [0.0; 3];
+                for s in p * spp..(p + 1) * spp {
+                    let e = records.irradiance[s];
+                    if e == [0.0; 3] {
+                        continue;
+                    }
+                    let f = brdf
+                        .eval(
+                            Vec3::from_f64(records.wi[s]),
+                            Vec3::from_f64(records.wo[s]),
+                            &mut rng,
+                        )
+                        .total();
+                    for c in 0..3 {
+                        sum[c] += (f[c] + diffuse[c]) * e[c];
+                    }
                 }
-                let f = brdf.eval(Vec3::from_f64(records.wi[s]), Vec3::from_f64(records.wo[s]), &mut rng).total();
-                for c in 0..3 {
-                    sum[c] += (f[c] + diffuse[c]) * e[c];
-                }
+                *value = sum.map(|v| v / spp as f64);
             }
-            *value = sum.map(|v| v / spp as f64);
-        }
-    });
+        });
     out
 }
 

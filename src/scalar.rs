@@ -227,7 +227,11 @@ impl<T: Real> Rgb<T> {
     /// Combine two triples channel by channel.
     #[inline]
     pub fn zip(self, o: Self, f: impl Fn(T, T) -> T) -> Self {
-        Rgb([f(self.0[0], o.0[0]), f(self.0[1], o.0[1]), f(self.0[2], o.0[2])])
+        Rgb([
+            f(self.0[0], o.0[0]),
+            f(self.0[1], o.0[1]),
+            f(self.0[2], o.0[2]),
+        ])
     }
     #[inline]
     pub fn scale(self, s: T) -> Self {

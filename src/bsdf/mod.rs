@@ -85,10 +85,13 @@ impl Model {
 impl std::str::FromStr for Model {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Model::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
-            let names: Vec<_> = Model::ALL.iter().map(|m| m.name()).collect();
-            format!("unknown model '{s}' (known: {})", names.join(", "))
-        })
+        Model::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = Model::ALL.iter().map(|m| m.name()).collect();
+                format!("unknown model '{s}' (known: {})", names.join(", "))
+            })
     }
 }
 

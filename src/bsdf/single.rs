@@ -34,7 +34,9 @@ impl<T: Real> SingleBounce<T> {
             return Rgb::splat(T::zero());
         }
         let h = (wi + wo).normalize();
-        let scalar = self.microfacet.d(h) * self.microfacet.g2_over_cosines(wi, wo, self.height) * T::c(0.25);
+        let scalar = self.microfacet.d(h)
+            * self.microfacet.g2_over_cosines(wi, wo, self.height)
+            * T::c(0.25);
         self.fresnel.eval(wi.dot(h)).scale(scalar)
     }
 
@@ -49,7 +51,9 @@ impl<T: Real> SingleBounce<T> {
             return None;
         }
         // G2 / G1(wi) = (G2 / (wi.z wo.z)) * wo.z * A(wi).
-        let ratio = self.microfacet.g2_over_cosines(wi, wo, self.height) * wo.z * self.microfacet.projected_area(wi);
+        let ratio = self.microfacet.g2_over_cosines(wi, wo, self.height)
+            * wo.z
+            * self.microfacet.projected_area(wi);
         Some((wo, self.fresnel.eval(wi.dot(m)).scale(ratio)))
     }
 
@@ -65,12 +69,19 @@ impl<T: Real> SingleBounce<T> {
 
 impl Brdf for SingleBounce<f64> {
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, _rng: &mut Rng) -> BrdfValue {
-        BrdfValue { single: SingleBounce::eval(self, wi, wo).0, multi: [0.0; 3] }
+        BrdfValue {
+            single: SingleBounce::eval(self, wi, wo).0,
+            multi: [0.0; 3],
+        }
     }
 
     fn sample(&self, wi: Vec3<f64>, u: [f64; 2], _rng: &mut Rng) -> Option<BrdfSample> {
         let (wo, weight) = self.sample_weighted(wi, u)?;
-        Some(BrdfSample { wo, weight: weight.0, pdf: SingleBounce::pdf(self, wi, wo) })
+        Some(BrdfSample {
+            wo,
+            weight: weight.0,
+            pdf: SingleBounce::pdf(self, wi, wo),
+        })
     }
 
     fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {

@@ -1,5 +1,7 @@
 //! Tests every model must pass; today `single`.
 
+#![allow(clippy::needless_range_loop)] // channel loops over several parallel arrays read best indexed
+
 use super::single::SingleBounce;
 use super::*;
 use crate::albedo::{directional_albedo, rng_stream};
@@ -14,11 +16,24 @@ fn unit(theta_deg: f64, phi_deg: f64) -> Vec3<f64> {
     Vec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
 }
 
-fn single(ndf: NdfKind, ax: f64, ay: f64, fresnel: FresnelSpec, height: Height) -> SingleBounce<f64> {
-    SingleBounce { microfacet: Microfacet::new(ndf, ax, ay), fresnel: fresnel.to_fresnel(), height }
+fn single(
+    ndf: NdfKind,
+    ax: f64,
+    ay: f64,
+    fresnel: FresnelSpec,
+    height: Height,
+) -> SingleBounce<f64> {
+    SingleBounce {
+        microfacet: Microfacet::new(ndf, ax, ay),
+        fresnel: fresnel.to_fresnel(),
+        height,
+    }
 }
 
-const COPPER: FresnelSpec = FresnelSpec::Conductor { eta: [0.27, 0.68, 1.22], k: [3.61, 2.63, 2.29] };
+const COPPER: FresnelSpec = FresnelSpec::Conductor {
+    eta: [0.27, 0.68, 1.22],
+    k: [3.61, 2.63, 2.29],
+};
 
 #[test]
 fn single_is_reciprocal() {
@@ -32,7 +47,10 @@ fn single_is_reciprocal() {
                 let wo = unit(rng.random_range(0.0..89.9), rng.random_range(0.0..360.0));
                 let (f, g) = (m.eval(wi, wo).0, m.eval(wo, wi).0);
                 for c in 0..3 {
-                    assert!((f[c] - g[c]).abs() <= 1e-12 * f[c].abs().max(1e-300), "{f:?} vs {g:?}");
+                    assert!(
+                        (f[c] - g[c]).abs() <= 1e-12 * f[c].abs().max(1e-300),
+                        "{f:?} vs {g:?}"
+                    );
                 }
             }
         }
@@ -43,14 +61,28 @@ fn single_is_reciprocal() {
 fn single_matches_the_textbook_formula() {
     // Walter et al. 2007 eq. 20 written out with tan-based Lambda, away from grazing.
     let (alpha, wi, wo) = (0.3, unit(30.0, 10.0), unit(50.0, 150.0));
-    let m = single(NdfKind::Ggx, alpha, alpha, FresnelSpec::Schlick { f0: [0.9, 0.6, 0.3] }, Height::Correlated);
+    let m = single(
+        NdfKind::Ggx,
+        alpha,
+        alpha,
+        FresnelSpec::Schlick {
+            f0: [0.9, 0.6, 0.3],
+        },
+        Height::Correlated,
+    );
     let h = (wi + wo).normalize();
     let lam = |w: Vec3<f64>| {
         let t2 = (1.0 - w.z * w.z) / (w.z * w.z);
         (-1.0 + (1.0 + alpha * alpha * t2).sqrt()) / 2.0
     };
     let cos2 = h.z * h.z;
-    let d = 1.0 / (PI * alpha * alpha * cos2 * cos2 * (1.0 + (1.0 - cos2) / cos2 / (alpha * alpha)).powi(2));
+    let d = 1.0
+        / (PI
+            * alpha
+            * alpha
+            * cos2
+            * cos2
+            * (1.0 + (1.0 - cos2) / cos2 / (alpha * alpha)).powi(2));
     let g2 = 1.0 / (1.0 + lam(wi) + lam(wo));
     let f = m.eval(wi, wo).0;
     let c = wi.dot(h);
@@ -68,13 +100,19 @@ fn sampling_weight_and_pdf_agree_with_eval() {
         let m = single(ndf, 0.4, 0.25, COPPER, Height::Correlated);
         for _ in 0..500 {
             let wi = unit(rng.random_range(0.0..89.0), rng.random_range(0.0..360.0));
-            let Some(s) = Brdf::sample(&m, wi, [rng.random(), rng.random()], &mut rng) else { continue };
+            let Some(s) = Brdf::sample(&m, wi, [rng.random(), rng.random()], &mut rng) else {
+                continue;
+            };
             let f = SingleBounce::eval(&m, wi, s.wo).0;
             let pdf = SingleBounce::pdf(&m, wi, s.wo);
             assert!((pdf - s.pdf).abs() < 1e-9 * pdf);
             for c in 0..3 {
                 let expected = f[c] * s.wo.z / pdf;
-                assert!((s.weight[c] - expected).abs() < 1e-9 * expected, "{} vs {expected}", s.weight[c]);
+                assert!(
+                    (s.weight[c] - expected).abs() < 1e-9 * expected,
+                    "{} vs {expected}",
+                    s.weight[c]
+                );
             }
         }
     }
@@ -88,11 +126,18 @@ fn albedo_by_hemisphere_quadrature(m: &SingleBounce<f64>, wi: Vec3<f64>, alpha: 
         let v = (j as f64 + 0.5) / nv as f64;
         let t = (0.5 * PI * v).tan();
         let theta = (alpha * t).atan();
-        let jac = alpha * 0.5 * PI * (1.0 + t * t) / (1.0 + alpha * alpha * t * t) * theta.sin() * 2.0 * PI;
+        let jac = alpha * 0.5 * PI * (1.0 + t * t) / (1.0 + alpha * alpha * t * t)
+            * theta.sin()
+            * 2.0
+            * PI;
         for i in 0..nu {
             let phi = 2.0 * PI * (i as f64 + 0.5) / nu as f64;
             // Half vectors are integrated instead of wo: d wo = 4 (wo.h) d h.
-            let h = Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+            let h = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            );
             let wo = wi.reflect(h);
             if wo.z <= 0.0 || wi.dot(h) <= 0.0 {
                 continue;
@@ -117,8 +162,17 @@ fn albedo_by_sampler_quadrature_is_accurate_to_1e3() {
                 let reference = albedo_by_hemisphere_quadrature(&m, wi, alpha);
                 for c in 0..3 {
                     let err = (est.value[c] - reference[c]).abs();
-                    assert!(err < 1e-3, "{ndf:?} alpha {alpha} theta {theta}: {} vs {}", est.value[c], reference[c]);
-                    assert!(est.stderr[c] < 1e-3, "{ndf:?} alpha {alpha} theta {theta}: error estimate {}, true error {err}", est.stderr[c]);
+                    assert!(
+                        err < 1e-3,
+                        "{ndf:?} alpha {alpha} theta {theta}: {} vs {}",
+                        est.value[c],
+                        reference[c]
+                    );
+                    assert!(
+                        est.stderr[c] < 1e-3,
+                        "{ndf:?} alpha {alpha} theta {theta}: error estimate {}, true error {err}",
+                        est.stderr[c]
+                    );
                 }
             }
         }
@@ -134,13 +188,25 @@ fn white_albedo_of_single_is_below_one_and_falls_with_roughness() {
                 let m = single(ndf, alpha, alpha, FresnelSpec::White, height);
                 let est = directional_albedo(&m, unit(0.0, 0.0), 65_536, 0);
                 let (e, err) = (est.value[0], est.stderr[0]);
-                assert!(e < previous.0 + err + previous.1, "{ndf:?} {height:?} alpha {alpha}: {e} >= {previous:?}");
-                assert!(e <= 1.0 + err && e > 0.0, "{ndf:?} {height:?} alpha {alpha}: {e} +- {err}");
+                assert!(
+                    e < previous.0 + err + previous.1,
+                    "{ndf:?} {height:?} alpha {alpha}: {e} >= {previous:?}"
+                );
+                assert!(
+                    e <= 1.0 + err && e > 0.0,
+                    "{ndf:?} {height:?} alpha {alpha}: {e} +- {err}"
+                );
                 previous = (e, err);
             }
             // At alpha = 0.01 almost nothing is lost; at alpha = 2 most is (an independent
             // uniform-hemisphere estimate gives 0.1437 +- 3e-5 for GGX correlated at alpha 1.5).
-            let smooth = directional_albedo(&single(ndf, 0.01, 0.01, FresnelSpec::White, height), unit(0.0, 0.0), 65_536, 0).value[0];
+            let smooth = directional_albedo(
+                &single(ndf, 0.01, 0.01, FresnelSpec::White, height),
+                unit(0.0, 0.0),
+                65_536,
+                0,
+            )
+            .value[0];
             assert!(smooth > 0.999, "{smooth}");
             assert!(previous.0 < 0.8, "{previous:?}");
         }
@@ -152,14 +218,30 @@ fn brdf_is_finite_and_non_negative_at_extremes() {
     let mut rng = rng_stream(3, 0);
     for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
         for a in [1e-4, 1e-3, 0.05, 1.0, 3.0] {
-            for fresnel in [FresnelSpec::White, COPPER, FresnelSpec::Conductor { eta: [0.01; 3], k: [20.0; 3] }, FresnelSpec::Dielectric { eta: 10.0 }] {
+            for fresnel in [
+                FresnelSpec::White,
+                COPPER,
+                FresnelSpec::Conductor {
+                    eta: [0.01; 3],
+                    k: [20.0; 3],
+                },
+                FresnelSpec::Dielectric { eta: 10.0 },
+            ] {
                 let m = single(ndf, a, a * 0.5, fresnel, Height::Correlated);
                 for _ in 0..300 {
                     let wi = unit(rng.random_range(0.0..90.0), rng.random_range(0.0..360.0));
                     let wo = unit(rng.random_range(0.0..90.0), rng.random_range(0.0..360.0));
-                    for (x, y) in [(wi, wo), (unit(89.9999, 0.0), wo), (wi, wi), (unit(89.99, 0.0), unit(89.99, 180.0))] {
+                    for (x, y) in [
+                        (wi, wo),
+                        (unit(89.9999, 0.0), wo),
+                        (wi, wi),
+                        (unit(89.99, 0.0), unit(89.99, 180.0)),
+                    ] {
                         let f = m.eval(x, y).0;
-                        assert!(f.iter().all(|v| v.is_finite() && *v >= 0.0), "{ndf:?} a {a} {fresnel:?}: {f:?} at {x:?} {y:?}");
+                        assert!(
+                            f.iter().all(|v| v.is_finite() && *v >= 0.0),
+                            "{ndf:?} a {a} {fresnel:?}: {f:?} at {x:?} {y:?}"
+                        );
                     }
                 }
             }

@@ -15,7 +15,13 @@ use std::path::Path;
 /// `folder`. The capture must have rectified cameras over a square sample and point or flash
 /// lights of one common intensity, as the format has no room for anything else.
 pub fn write(folder: &Path, capture: &Capture, pixels: &[[f64; 3]]) -> Result<()> {
-    let unsupported = |field: String, msg: &str| Error::invalid(capture.root.join(super::MANIFEST_NAME), field, format!("{msg} (the MaterialGAN format has no room for it)"));
+    let unsupported = |field: String, msg: &str| {
+        Error::invalid(
+            capture.root.join(super::MANIFEST_NAME),
+            field,
+            format!("{msg} (the MaterialGAN format has no room for it)"),
+        )
+    };
     if (capture.sample.width - capture.sample.height).abs() > 1e-9 * capture.sample.width {
         return Err(unsupported("sample".into(), "the sample must be square"));
     }
@@ -23,19 +29,37 @@ pub fn write(folder: &Path, capture: &Capture, pixels: &[[f64; 3]]) -> Result<()
     let mut offset = 0;
     for (i, photo) in capture.photos.iter().enumerate() {
         let Camera::Rectified(camera) = &photo.camera else {
-            return Err(unsupported(format!("photo[{i}].camera.model"), "the camera must be rectified"));
+            return Err(unsupported(
+                format!("photo[{i}].camera.model"),
+                "the camera must be rectified",
+            ));
         };
         let (position, intensity) = match &photo.light {
             Light::Flash { intensity } => (camera.position, *intensity),
-            Light::Point { position, intensity } => (*position, *intensity),
-            Light::Directional { .. } => return Err(unsupported(format!("photo[{i}].light.kind"), "lights must be point lights or flashes")),
+            Light::Point {
+                position,
+                intensity,
+            } => (*position, *intensity),
+            Light::Directional { .. } => {
+                return Err(unsupported(
+                    format!("photo[{i}].light.kind"),
+                    "lights must be point lights or flashes",
+                ))
+            }
         };
         let intensity = intensity.map(|v| v * photo.exposure);
         if power.is_some_and(|p: [f64; 3]| p != intensity) {
-            return Err(unsupported(format!("photo[{i}].light.intensity"), "all photos must share one light power"));
+            return Err(unsupported(
+                format!("photo[{i}].light.intensity"),
+                "all photos must share one light power",
+            ));
         }
         power = Some(intensity);
-        let _ = writeln!(cameras, "{},{},{}", camera.position.x, camera.position.y, camera.position.z);
+        let _ = writeln!(
+            cameras,
+            "{},{},{}",
+            camera.position.x, camera.position.y, camera.position.z
+        );
         let _ = writeln!(lights, "{},{},{}", position.x, position.y, position.z);
         let [w, h] = camera.resolution;
         let mut image = image::RgbImage::new(w as u32, h as u32);
@@ -47,11 +71,15 @@ pub fn write(folder: &Path, capture: &Capture, pixels: &[[f64; 3]]) -> Result<()
         let path = folder.join(format!("{i:02}.png"));
         image.save(&path).map_err(|e| Error::io(&path, e))?;
     }
-    let power = power.ok_or_else(|| unsupported("photo".into(), "there must be at least one photo"))?;
+    let power =
+        power.ok_or_else(|| unsupported("photo".into(), "there must be at least one photo"))?;
     let files = [
         ("camera_pos.txt", cameras),
         ("light_pos.txt", lights),
-        ("light_power.txt", format!("{},{},{}\n", power[0], power[1], power[2])),
+        (
+            "light_power.txt",
+            format!("{},{},{}\n", power[0], power[1], power[2]),
+        ),
         ("image_size.txt", format!("{}\n", capture.sample.width)),
     ];
     for (name, text) in files {

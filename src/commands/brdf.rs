@@ -53,7 +53,11 @@ pub fn run_brdf(args: &BrdfArgs) -> Result<()> {
     }
     let brdf = material.brdf();
     let start = Instant::now();
-    let n = if brdf.is_stochastic() { args.samples } else { 1 };
+    let n = if brdf.is_stochastic() {
+        args.samples
+    } else {
+        1
+    };
     let (mut sum, mut sum2, mut single) = ([0.0; 3], [0.0; 3], [0.0; 3]);
     let mut rng = rng_stream(args.seed, 0);
     for _ in 0..n {
@@ -65,7 +69,13 @@ pub fn run_brdf(args: &BrdfArgs) -> Result<()> {
         }
     }
     let multi = sum.map(|s| s / n as f64);
-    let stderr = [0, 1, 2].map(|c| if n > 1 { ((sum2[c] / n as f64 - multi[c] * multi[c]).max(0.0) / (n - 1) as f64).sqrt() } else { 0.0 });
+    let stderr = [0, 1, 2].map(|c| {
+        if n > 1 {
+            ((sum2[c] / n as f64 - multi[c] * multi[c]).max(0.0) / (n - 1) as f64).sqrt()
+        } else {
+            0.0
+        }
+    });
     let f = [0, 1, 2].map(|c| single[c] + multi[c]);
     let seconds = start.elapsed().as_secs_f64();
     let out = json!({
@@ -74,7 +84,9 @@ pub fn run_brdf(args: &BrdfArgs) -> Result<()> {
         "f": f, "f_cos": f.map(|v| v * wo.z), "f_single": single, "f_multi": multi,
         "stderr": stderr, "samples": n, "seconds": seconds,
     });
-    print_result(args.json, &out, || format!("f = {:.6e} {:.6e} {:.6e} 1/sr (single {:.6e} {:.6e} {:.6e}, multi {:.6e} {:.6e} {:.6e} +- {:.1e})", f[0], f[1], f[2], single[0], single[1], single[2], multi[0], multi[1], multi[2], stderr.iter().cloned().fold(0.0, f64::max)));
+    print_result(args.json, &out, || {
+        format!("f = {:.6e} {:.6e} {:.6e} 1/sr (single {:.6e} {:.6e} {:.6e}, multi {:.6e} {:.6e} {:.6e} +- {:.1e})", f[0], f[1], f[2], single[0], single[1], single[2], multi[0], multi[1], multi[2], stderr.iter().cloned().fold(0.0, f64::max))
+    });
     Ok(())
 }
 
@@ -82,7 +94,10 @@ pub fn run_brdf(args: &BrdfArgs) -> Result<()> {
 pub fn run_albedo(args: &AlbedoArgs) -> Result<()> {
     let material = args.material.material()?;
     if !(0.0..90.0).contains(&args.theta_i) {
-        return Err(Error::argument("--theta-i", format!("{} is outside [0, 90) degrees", args.theta_i)));
+        return Err(Error::argument(
+            "--theta-i",
+            format!("{} is outside [0, 90) degrees", args.theta_i),
+        ));
     }
     let t = args.theta_i.to_radians();
     let wi = Vec3::new(t.sin(), 0.0, t.cos());
@@ -91,7 +106,16 @@ pub fn run_albedo(args: &AlbedoArgs) -> Result<()> {
         "model": material.model.name(), "ndf": material.ndf.name(), "alpha": material.alpha,
         "theta_i_deg": args.theta_i, "albedo": est.value, "stderr": est.stderr, "samples": est.samples,
     });
-    print_result(args.json, &out, || format!("albedo = {:.6} {:.6} {:.6} (+- {:.1e}, {} samples)", est.value[0], est.value[1], est.value[2], est.stderr.iter().cloned().fold(0.0, f64::max), est.samples));
+    print_result(args.json, &out, || {
+        format!(
+            "albedo = {:.6} {:.6} {:.6} (+- {:.1e}, {} samples)",
+            est.value[0],
+            est.value[1],
+            est.value[2],
+            est.stderr.iter().cloned().fold(0.0, f64::max),
+            est.samples
+        )
+    });
     Ok(())
 }
 

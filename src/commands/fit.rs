@@ -89,18 +89,32 @@ struct FitFile<'a> {
 pub fn run_fit(args: &FitArgs) -> Result<()> {
     let capture = Capture::open(&args.capture)?;
     super::synth::warn_all(&capture);
-    let output = args.output.clone().unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
     check_overwrite(&output, args.force)?;
     let residual_folder = output.with_extension("residuals");
     let records = ShadingRecords::build(&capture, args.pixel_samples, true)?;
     let pixels_used = records.weight.iter().filter(|w| **w > 0.0).count();
     if pixels_used == 0 {
-        return Err(Error::invalid(&args.capture, "photos", "every pixel is excluded (masked, saturated, non-finite or outside the sample)"));
+        return Err(Error::invalid(
+            &args.capture,
+            "photos",
+            "every pixel is excluded (masked, saturated, non-finite or outside the sample)",
+        ));
     }
     let mut fits = Vec::new();
     for &model in &args.models {
         let options = FitOptions {
-            space: ParamSpace { model, ndf: args.ndf, height: args.height, anisotropic: args.anisotropic, fresnel: args.fresnel, diffuse: args.diffuse },
+            space: ParamSpace {
+                model,
+                ndf: args.ndf,
+                height: args.height,
+                anisotropic: args.anisotropic,
+                fresnel: args.fresnel,
+                diffuse: args.diffuse,
+            },
             optimizer: args.optimizer,
             loss: args.loss,
             max_iters: args.max_iters,
@@ -113,8 +127,20 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         }
         fits.push(fit);
     }
-    let best = fits.iter().min_by(|a, b| a.loss.total_cmp(&b.loss)).expect("at least one model");
-    let candidates = fits.iter().map(|f| Candidate { model: f.material.model, loss: f.loss, alpha: f.material.alpha, f0: f.f0, seconds: f.seconds }).collect();
+    let best = fits
+        .iter()
+        .min_by(|a, b| a.loss.total_cmp(&b.loss))
+        .expect("at least one model");
+    let candidates = fits
+        .iter()
+        .map(|f| Candidate {
+            model: f.material.model,
+            loss: f.loss,
+            alpha: f.material.alpha,
+            f0: f.f0,
+            seconds: f.seconds,
+        })
+        .collect();
     let file = FitFile {
         best,
         edge_tint: edge_tint(&best.material),
@@ -130,14 +156,27 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
 
     // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure).
     let predicted = render_all(&best.material, &records, args.seed);
-    let residual: Vec<[f64; 3]> = predicted.iter().zip(&records.target).zip(&records.weight).map(|((p, t), w)| if *w > 0.0 { [0, 1, 2].map(|c| p[c] - t[c]) } else { [0.0; 3] }).collect();
+    let residual: Vec<[f64; 3]> = predicted
+        .iter()
+        .zip(&records.target)
+        .zip(&records.weight)
+        .map(|((p, t), w)| {
+            if *w > 0.0 {
+                [0, 1, 2].map(|c| p[c] - t[c])
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
     let folder = StagedFolder::new(&residual_folder, true)?;
     let exposure = display_exposure(&records.target);
     write_photo_images(&folder.path(""), &records, &residual, exposure, "")?;
     if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
     }
-    crate::capture::atomic_file::write_atomically(&output, |w| serde_json::to_writer_pretty(&mut *w, &file).map_err(|e| Error::io(&output, e)))?;
+    crate::capture::atomic_file::write_atomically(&output, |w| {
+        serde_json::to_writer_pretty(&mut *w, &file).map_err(|e| Error::io(&output, e))
+    })?;
     folder.commit()?;
     println!("{}", output.display());
     Ok(())

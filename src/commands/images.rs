@@ -8,7 +8,11 @@ use std::path::Path;
 /// Exposure that maps the 99.5th percentile of all channel values to 1 (so highlights clip
 /// only slightly and the PNGs of one set share one exposure).
 pub fn display_exposure(values: &[[f64; 3]]) -> f64 {
-    let mut all: Vec<f64> = values.iter().flat_map(|v| v.iter().copied()).filter(|v| v.is_finite() && *v > 0.0).collect();
+    let mut all: Vec<f64> = values
+        .iter()
+        .flat_map(|v| v.iter().copied())
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
     if all.is_empty() {
         return 1.0;
     }
@@ -19,13 +23,33 @@ pub fn display_exposure(values: &[[f64; 3]]) -> f64 {
 
 /// Write `folder/<stem>.exr` and `folder/<stem>.png` for every photo of `records`, with pixel
 /// values `per_pixel` (one per pixel of the records). Returns the file stems written.
-pub fn write_photo_images(folder: &Path, records: &ShadingRecords, per_pixel: &[[f64; 3]], exposure: f64, suffix: &str) -> Result<()> {
+pub fn write_photo_images(
+    folder: &Path,
+    records: &ShadingRecords,
+    per_pixel: &[[f64; 3]],
+    exposure: f64,
+    suffix: &str,
+) -> Result<()> {
     for photo in &records.photos {
         let n = photo.width * photo.height;
-        let rgb: Vec<[f32; 3]> = per_pixel[photo.first_pixel..photo.first_pixel + n].iter().map(|v| v.map(|c| c as f32)).collect();
+        let rgb: Vec<[f32; 3]> = per_pixel[photo.first_pixel..photo.first_pixel + n]
+            .iter()
+            .map(|v| v.map(|c| c as f32))
+            .collect();
         let stem = format!("{}{suffix}", photo.stem);
-        write_exr(&folder.join(format!("{stem}.exr")), &rgb, photo.width, photo.height)?;
-        write_png_tonemapped(&folder.join(format!("{stem}.png")), &rgb, photo.width, photo.height, exposure)?;
+        write_exr(
+            &folder.join(format!("{stem}.exr")),
+            &rgb,
+            photo.width,
+            photo.height,
+        )?;
+        write_png_tonemapped(
+            &folder.join(format!("{stem}.png")),
+            &rgb,
+            photo.width,
+            photo.height,
+            exposure,
+        )?;
     }
     Ok(())
 }

@@ -23,13 +23,13 @@ pub struct MaterialArgs {
     #[arg(long, default_value = "ggx")]
     pub ndf: NdfKind,
     /// Isotropic roughness alpha (not perceptual roughness).
-    #[arg(long, conflicts_with_all = ["alpha_x", "alpha_y"], required_unless_present_all = ["alpha_x", "alpha_y"])]
+    #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["alpha_x", "alpha_y"], required_unless_present_all = ["alpha_x", "alpha_y"])]
     pub alpha: Option<f64>,
     /// Roughness along x (with --alpha-y).
-    #[arg(long, requires = "alpha_y")]
+    #[arg(long, allow_hyphen_values = true, requires = "alpha_y")]
     pub alpha_x: Option<f64>,
     /// Roughness along y (with --alpha-x).
-    #[arg(long, requires = "alpha_x")]
+    #[arg(long, allow_hyphen_values = true, requires = "alpha_x")]
     pub alpha_y: Option<f64>,
     /// white | conductor:ETA_R,ETA_G,ETA_B:K_R,K_G,K_B | schlick:R,G,B | dielectric:ETA
     #[arg(long, default_value = "white")]
@@ -45,28 +45,54 @@ impl MaterialArgs {
         let alpha = match (self.alpha, self.alpha_x, self.alpha_y) {
             (Some(a), _, _) => [a, a],
             (None, Some(x), Some(y)) => [x, y],
-            _ => return Err(Error::argument("--alpha", "give --alpha or both --alpha-x and --alpha-y")),
+            _ => {
+                return Err(Error::argument(
+                    "--alpha",
+                    "give --alpha or both --alpha-x and --alpha-y",
+                ))
+            }
         };
-        let material = Material { model: self.model, ndf: self.ndf, height: self.height, alpha, fresnel: FresnelSpec::parse(&self.fresnel)?, diffuse: [0.0; 3] };
-        material.validate().map_err(|(field, msg)| Error::argument(format!("--{field}"), msg))?;
+        let material = Material {
+            model: self.model,
+            ndf: self.ndf,
+            height: self.height,
+            alpha,
+            fresnel: FresnelSpec::parse(&self.fresnel)?,
+            diffuse: [0.0; 3],
+        };
+        material
+            .validate()
+            .map_err(|(field, msg)| Error::argument(format!("--{field}"), msg))?;
         Ok(material)
     }
 }
 
 /// Parse `X,Y,Z` into a unit direction above the surface (reflection-only models).
 pub fn parse_direction(flag: &str, text: &str) -> Result<Vec3<f64>> {
-    let v: Vec<f64> = text.split(',').map(|x| x.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| Error::argument(flag, format!("'{text}' is not X,Y,Z")))?;
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| Error::argument(flag, format!("'{text}' is not X,Y,Z")))?;
     let [x, y, z] = v[..] else {
         return Err(Error::argument(flag, format!("'{text}' is not X,Y,Z")));
     };
     let w = Vec3::new(x, y, z);
     let len = w.length();
     if !len.is_finite() || len == 0.0 {
-        return Err(Error::argument(flag, format!("'{text}' is not a direction (zero or non-finite length)")));
+        return Err(Error::argument(
+            flag,
+            format!("'{text}' is not a direction (zero or non-finite length)"),
+        ));
     }
     let w = w * (1.0 / len);
     if w.z <= 0.0 {
-        return Err(Error::argument(flag, format!("'{text}' points below or along the surface (z <= 0); reflection models need z > 0")));
+        return Err(Error::argument(
+            flag,
+            format!(
+                "'{text}' points below or along the surface (z <= 0); reflection models need z > 0"
+            ),
+        ));
     }
     Ok(w)
 }

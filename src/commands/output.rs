@@ -14,20 +14,36 @@ impl StagedFolder {
     /// Prepare to write `destination`; fails if it holds files and `force` is off.
     pub fn new(destination: &Path, force: bool) -> Result<Self> {
         if destination.exists() {
-            let non_empty = std::fs::read_dir(destination).map_err(|e| Error::io(destination, e))?.next().is_some();
+            let non_empty = std::fs::read_dir(destination)
+                .map_err(|e| Error::io(destination, e))?
+                .next()
+                .is_some();
             if non_empty && !force {
-                return Err(Error::invalid(destination, "output", "folder exists and is not empty; pass --force to replace it"));
+                return Err(Error::invalid(
+                    destination,
+                    "output",
+                    "folder exists and is not empty; pass --force to replace it",
+                ));
             }
         }
-        let name = destination.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-        let parent = destination.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let name = destination
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "out".into());
+        let parent = destination
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
         let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
         if staging.exists() {
             std::fs::remove_dir_all(&staging).map_err(|e| Error::io(&staging, e))?;
         }
         std::fs::create_dir(&staging).map_err(|e| Error::io(destination, e))?;
-        Ok(StagedFolder { destination: destination.to_path_buf(), staging })
+        Ok(StagedFolder {
+            destination: destination.to_path_buf(),
+            staging,
+        })
     }
 
     /// Where to write a file that will end up as `destination/name`.
@@ -38,9 +54,11 @@ impl StagedFolder {
     /// Move the complete folder into place.
     pub fn commit(self) -> Result<()> {
         if self.destination.exists() {
-            std::fs::remove_dir_all(&self.destination).map_err(|e| Error::io(&self.destination, e))?;
+            std::fs::remove_dir_all(&self.destination)
+                .map_err(|e| Error::io(&self.destination, e))?;
         }
-        std::fs::rename(&self.staging, &self.destination).map_err(|e| Error::io(&self.destination, e))?;
+        std::fs::rename(&self.staging, &self.destination)
+            .map_err(|e| Error::io(&self.destination, e))?;
         std::mem::forget(self);
         Ok(())
     }
@@ -56,7 +74,11 @@ impl Drop for StagedFolder {
 /// Refuse to overwrite an existing file without `--force`.
 pub fn check_overwrite(path: &Path, force: bool) -> Result<()> {
     if path.exists() && !force {
-        return Err(Error::invalid(path, "output", "file exists; pass --force to replace it"));
+        return Err(Error::invalid(
+            path,
+            "output",
+            "file exists; pass --force to replace it",
+        ));
     }
     Ok(())
 }

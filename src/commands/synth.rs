@@ -68,7 +68,10 @@ pub struct RenderArgs {
 
 pub fn run_synth(args: &SynthArgs) -> Result<()> {
     if !(args.noise.is_finite() && args.noise >= 0.0) {
-        return Err(Error::argument("--noise", format!("must be a finite number >= 0, got {}", args.noise)));
+        return Err(Error::argument(
+            "--noise",
+            format!("must be a finite number >= 0, got {}", args.noise),
+        ));
     }
     let material = Material::load(&args.material)?;
     let capture = Capture::open(&args.capture)?;
@@ -89,10 +92,20 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
     if args.format == SynthFormat::Materialgan {
         crate::capture::materialgan_writer::write(&staging_root, &capture, &pixels)?;
         folder.commit()?;
-        eprintln!("wrote {} MaterialGAN-format photos to {}", records.photos.len(), args.output.display());
+        eprintln!(
+            "wrote {} MaterialGAN-format photos to {}",
+            records.photos.len(),
+            args.output.display()
+        );
         return Ok(());
     }
-    write_photo_images(&staging_root, &records, &pixels, display_exposure(&pixels), "")?;
+    write_photo_images(
+        &staging_root,
+        &records,
+        &pixels,
+        display_exposure(&pixels),
+        "",
+    )?;
     let mut synthetic = capture.clone();
     synthetic.root = staging_root.clone();
     for photo in &mut synthetic.photos {
@@ -103,10 +116,17 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
     }
     synthetic.save_manifest(&folder.path("capture.toml"))?;
     crate::capture::atomic_file::write_atomically(&folder.path("material.json"), |w| {
-        serde_json::to_writer_pretty(&mut *w, &material).map_err(|e| Error::io(args.output.join("material.json"), e))
+        serde_json::to_writer_pretty(&mut *w, &material)
+            .map_err(|e| Error::io(args.output.join("material.json"), e))
     })?;
     folder.commit()?;
-    eprintln!("wrote {} photos of {}x{} to {}", records.photos.len(), records.photos[0].width, records.photos[0].height, args.output.display());
+    eprintln!(
+        "wrote {} photos of {}x{} to {}",
+        records.photos.len(),
+        records.photos[0].width,
+        records.photos[0].height,
+        args.output.display()
+    );
     Ok(())
 }
 
@@ -117,9 +137,19 @@ pub fn run_render(args: &RenderArgs) -> Result<()> {
     let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
     let pixels = render_all(&material, &records, args.seed);
     let folder = StagedFolder::new(&args.output, args.force)?;
-    write_photo_images(&folder.path(""), &records, &pixels, display_exposure(&pixels), "")?;
+    write_photo_images(
+        &folder.path(""),
+        &records,
+        &pixels,
+        display_exposure(&pixels),
+        "",
+    )?;
     folder.commit()?;
-    eprintln!("rendered {} photos to {}", records.photos.len(), args.output.display());
+    eprintln!(
+        "rendered {} photos to {}",
+        records.photos.len(),
+        args.output.display()
+    );
     Ok(())
 }
 

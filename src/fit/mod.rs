@@ -87,7 +87,9 @@ pub struct ModelFit {
 /// Roughness values of the coarse start scan: a geometric grid (ratio 1.8) from 0.012 to 2.4
 /// that avoids round values, so fits of synthetic sets made at round roughness exercise the
 /// optimiser rather than land on a scan node.
-const SCAN_ALPHAS: [f64; 10] = [0.012, 0.0216, 0.0389, 0.07, 0.126, 0.227, 0.408, 0.735, 1.32, 2.38];
+const SCAN_ALPHAS: [f64; 10] = [
+    0.012, 0.0216, 0.0389, 0.07, 0.126, 0.227, 0.408, 0.735, 1.32, 2.38,
+];
 
 /// Start edge tint of conductor fits (Gulbrandsen's g): measured metals lie between 0.85 and
 /// 0.99 (Cu, Au, Ag, Al at 450-650 nm), and for F0 above ~0.9 photos constrain g only weakly, so
@@ -97,10 +99,19 @@ const START_EDGE_TINT: f64 = 0.9;
 /// Start point: the scan alpha whose white-Fresnel prediction, scaled per channel by the
 /// least-squares factor `sum p t / sum p^2`, has the lowest squared error.
 fn start_material(space: &ParamSpace, records: &ShadingRecords, seed: u64) -> Material {
-    let pixels: Vec<usize> = (0..records.pixel_count()).filter(|&p| records.weight[p] > 0.0).collect();
+    let pixels: Vec<usize> = (0..records.pixel_count())
+        .filter(|&p| records.weight[p] > 0.0)
+        .collect();
     let mut best: Option<(f64, f64, [f64; 3])> = None;
     for alpha in SCAN_ALPHAS {
-        let probe = Material { model: space.model, ndf: space.ndf, height: space.height, alpha: [alpha; 2], fresnel: FresnelSpec::White, diffuse: [0.0; 3] };
+        let probe = Material {
+            model: space.model,
+            ndf: space.ndf,
+            height: space.height,
+            alpha: [alpha; 2],
+            fresnel: FresnelSpec::White,
+            diffuse: [0.0; 3],
+        };
         let predicted = render_pixels(&probe, records, &pixels, seed);
         let mut err = 0.0;
         let mut scale = [0.0; 3];
@@ -124,12 +135,24 @@ fn start_material(space: &ParamSpace, records: &ShadingRecords, seed: u64) -> Ma
     let fresnel = match space.fresnel {
         FresnelFamily::Schlick => FresnelSpec::Schlick { f0 },
         FresnelFamily::Conductor => {
-            let ior = f0.map(|r| crate::microfacet::fresnel::ior_from_reflectivity_edge_tint(r, START_EDGE_TINT));
-            FresnelSpec::Conductor { eta: ior.map(|p| p.0), k: ior.map(|p| p.1) }
+            let ior = f0.map(|r| {
+                crate::microfacet::fresnel::ior_from_reflectivity_edge_tint(r, START_EDGE_TINT)
+            });
+            FresnelSpec::Conductor {
+                eta: ior.map(|p| p.0),
+                k: ior.map(|p| p.1),
+            }
         }
     };
     let diffuse = if space.diffuse { [0.02; 3] } else { [0.0; 3] };
-    Material { model: space.model, ndf: space.ndf, height: space.height, alpha: [alpha; 2], fresnel, diffuse }
+    Material {
+        model: space.model,
+        ndf: space.ndf,
+        height: space.height,
+        alpha: [alpha; 2],
+        fresnel,
+        diffuse,
+    }
 }
 
 /// Observer that records the trace and drives the progress display.
@@ -142,8 +165,19 @@ struct TraceObserver {
 impl<I: State<Float = f64>> Observe<I> for TraceObserver {
     fn observe_iter(&mut self, state: &I, _kv: &KV) -> std::result::Result<(), ArgminError> {
         let loss = state.get_best_cost() * self.scale;
-        let evaluations = state.get_func_counts().get("cost_count").copied().unwrap_or(0) as usize;
-        self.trace.lock().expect("no panics while holding the lock").push(TracePoint { iteration: state.get_iter(), evaluations, loss });
+        let evaluations = state
+            .get_func_counts()
+            .get("cost_count")
+            .copied()
+            .unwrap_or(0) as usize;
+        self.trace
+            .lock()
+            .expect("no panics while holding the lock")
+            .push(TracePoint {
+                iteration: state.get_iter(),
+                evaluations,
+                loss,
+            });
         if let Some(p) = &mut self.progress {
             p.update(state.get_iter(), || format!("loss {loss:.4e}"));
         }
@@ -157,7 +191,10 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
     let space = options.space;
     let objective = Objective::new(space, records, options.loss, options.seed);
     if objective.pixel_count() == 0 {
-        return Err(Error::argument("photos", "no pixel enters the loss (all masked, saturated, non-finite or outside the sample)"));
+        return Err(Error::argument(
+            "photos",
+            "no pixel enters the loss (all masked, saturated, non-finite or outside the sample)",
+        ));
     }
     let start = start_material(&space, records, options.seed);
     let x0 = space.point(&start);
@@ -165,7 +202,9 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
     let trace = Arc::new(Mutex::new(Vec::new()));
     let observer = TraceObserver {
         trace: trace.clone(),
-        progress: options.progress.then(|| Progress::new(&format!("fit {}", space.model), options.max_iters)),
+        progress: options
+            .progress
+            .then(|| Progress::new(&format!("fit {}", space.model), options.max_iters)),
         scale,
     };
     let argmin_failed = |e: ArgminError| Error::argument("optimizer", e.to_string());
@@ -177,28 +216,61 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
                 v[i] += 0.25;
                 simplex.push(v);
             }
-            let solver = NelderMead::new(simplex).with_sd_tolerance(1e-12).map_err(argmin_failed)?;
-            let res = Executor::new(&objective, solver).configure(|s| s.max_iters(options.max_iters)).add_observer(observer, ObserverMode::Always).run().map_err(argmin_failed)?;
-            (res.state.get_iter(), res.state.get_termination_status().to_string())
+            let solver = NelderMead::new(simplex)
+                .with_sd_tolerance(1e-12)
+                .map_err(argmin_failed)?;
+            let res = Executor::new(&objective, solver)
+                .configure(|s| s.max_iters(options.max_iters))
+                .add_observer(observer, ObserverMode::Always)
+                .run()
+                .map_err(argmin_failed)?;
+            (
+                res.state.get_iter(),
+                res.state.get_termination_status().to_string(),
+            )
         }
         Optimizer::Lbfgs => {
             let linesearch = MoreThuenteLineSearch::new();
-            let solver = LBFGS::new(linesearch, 8).with_tolerance_grad(1e-9).map_err(argmin_failed)?.with_tolerance_cost(1e-13).map_err(argmin_failed)?;
-            let res = Executor::new(&objective, solver).configure(|s| s.param(x0.clone()).max_iters(options.max_iters)).add_observer(observer, ObserverMode::Always).run().map_err(argmin_failed)?;
-            (res.state.get_iter(), res.state.get_termination_status().to_string())
+            let solver = LBFGS::new(linesearch, 8)
+                .with_tolerance_grad(1e-9)
+                .map_err(argmin_failed)?
+                .with_tolerance_cost(1e-13)
+                .map_err(argmin_failed)?;
+            let res = Executor::new(&objective, solver)
+                .configure(|s| s.param(x0.clone()).max_iters(options.max_iters))
+                .add_observer(observer, ObserverMode::Always)
+                .run()
+                .map_err(argmin_failed)?;
+            (
+                res.state.get_iter(),
+                res.state.get_termination_status().to_string(),
+            )
         }
     };
     // The best point ever evaluated (line-search probes included) is the answer.
-    let (_, best_x) = objective.best.lock().expect("no panics while holding the lock").clone();
+    let (_, best_x) = objective
+        .best
+        .lock()
+        .expect("no panics while holding the lock")
+        .clone();
     let material = space.material(&best_x);
     let photos = objective
         .loss_per_photo(&best_x)
         .into_iter()
-        .map(|(i, loss, pixels)| PhotoLoss { image: records.photos[i].stem.clone(), loss, pixels })
+        .map(|(i, loss, pixels)| PhotoLoss {
+            image: records.photos[i].stem.clone(),
+            loss,
+            pixels,
+        })
         .collect();
     let loss = objective.loss(&best_x);
-    let evaluations = objective.evaluations.load(std::sync::atomic::Ordering::Relaxed);
-    let trace = trace.lock().expect("no panics while holding the lock").clone();
+    let evaluations = objective
+        .evaluations
+        .load(std::sync::atomic::Ordering::Relaxed);
+    let trace = trace
+        .lock()
+        .expect("no panics while holding the lock")
+        .clone();
     let f0 = material.fresnel.f0();
     Ok(ModelFit {
         material,
@@ -219,7 +291,9 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
 /// Edge tint of each channel of a conductor fit, for reports (`None` for other Fresnel kinds).
 pub fn edge_tint(material: &Material) -> Option<[f64; 3]> {
     match material.fresnel {
-        FresnelSpec::Conductor { eta, k } => Some([0, 1, 2].map(|c| reflectivity_edge_tint_from_ior(eta[c], k[c]).1)),
+        FresnelSpec::Conductor { eta, k } => {
+            Some([0, 1, 2].map(|c| reflectivity_edge_tint_from_ior(eta[c], k[c]).1))
+        }
         _ => None,
     }
 }

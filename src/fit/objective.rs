@@ -36,17 +36,36 @@ pub struct Objective<'a> {
 
 impl<'a> Objective<'a> {
     pub fn new(space: ParamSpace, records: &'a ShadingRecords, kind: LossKind, seed: u64) -> Self {
-        let pixels: Vec<usize> = (0..records.pixel_count()).filter(|&p| records.weight[p] > 0.0).collect();
+        let pixels: Vec<usize> = (0..records.pixel_count())
+            .filter(|&p| records.weight[p] > 0.0)
+            .collect();
         let target: Vec<[f64; 3]> = pixels.iter().map(|&p| records.target[p]).collect();
         let weight: Vec<f64> = pixels.iter().map(|&p| records.weight[p]).collect();
         let scale = match kind {
             LossKind::L2 => {
                 let wsum: f64 = weight.iter().sum();
-                (target.iter().zip(&weight).map(|(t, w)| w * (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]) / 3.0).sum::<f64>() / wsum).max(1e-300)
+                (target
+                    .iter()
+                    .zip(&weight)
+                    .map(|(t, w)| w * (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]) / 3.0)
+                    .sum::<f64>()
+                    / wsum)
+                    .max(1e-300)
             }
             LossKind::LogL1 => 1.0,
         };
-        Objective { space, records, pixels, target, weight, kind, seed, scale, evaluations: AtomicUsize::new(0), best: Mutex::new((f64::INFINITY, Vec::new())) }
+        Objective {
+            space,
+            records,
+            pixels,
+            target,
+            weight,
+            kind,
+            seed,
+            scale,
+            evaluations: AtomicUsize::new(0),
+            best: Mutex::new((f64::INFINITY, Vec::new())),
+        }
     }
 
     pub fn pixel_count(&self) -> usize {
@@ -55,7 +74,12 @@ impl<'a> Objective<'a> {
 
     /// Predicted radiance of the loss pixels at coordinates `x`.
     pub fn predict(&self, x: &[f64]) -> Vec<[f64; 3]> {
-        render_pixels(&self.space.material(x), self.records, &self.pixels, self.seed)
+        render_pixels(
+            &self.space.material(x),
+            self.records,
+            &self.pixels,
+            self.seed,
+        )
     }
 
     /// The loss (not normalised) at `x`.

@@ -14,7 +14,9 @@
 
 use crate::bsdf::Model;
 use crate::material::{FresnelSpec, Material};
-use crate::microfacet::fresnel::{ior_from_reflectivity_edge_tint, reflectivity_edge_tint_from_ior};
+use crate::microfacet::fresnel::{
+    ior_from_reflectivity_edge_tint, reflectivity_edge_tint_from_ior,
+};
 use crate::microfacet::{Height, NdfKind};
 use serde::{Deserialize, Serialize};
 
@@ -63,7 +65,11 @@ impl ParamSpace {
 
     /// Coordinate names, in order, for traces and reports.
     pub fn names(&self) -> Vec<String> {
-        let mut names = if self.anisotropic { vec!["ln_alpha_x".to_string(), "ln_alpha_y".into()] } else { vec!["ln_alpha".to_string()] };
+        let mut names = if self.anisotropic {
+            vec!["ln_alpha_x".to_string(), "ln_alpha_y".into()]
+        } else {
+            vec!["ln_alpha".to_string()]
+        };
         let rgb = |p: &str| ["r", "g", "b"].map(|c| format!("{p}_{c}"));
         match self.fresnel {
             FresnelFamily::Schlick => names.extend(rgb("logit_f0")),
@@ -81,21 +87,53 @@ impl ParamSpace {
     /// The material at coordinates `x`.
     pub fn material(&self, x: &[f64]) -> Material {
         debug_assert_eq!(x.len(), self.dim());
-        let (alpha, rest) = if self.anisotropic { ([x[0].exp(), x[1].exp()], &x[2..]) } else { ([x[0].exp(); 2], &x[1..]) };
+        let (alpha, rest) = if self.anisotropic {
+            ([x[0].exp(), x[1].exp()], &x[2..])
+        } else {
+            ([x[0].exp(); 2], &x[1..])
+        };
         let (fresnel, rest) = match self.fresnel {
-            FresnelFamily::Schlick => (FresnelSpec::Schlick { f0: [0, 1, 2].map(|c| sigmoid(rest[c])) }, &rest[3..]),
+            FresnelFamily::Schlick => (
+                FresnelSpec::Schlick {
+                    f0: [0, 1, 2].map(|c| sigmoid(rest[c])),
+                },
+                &rest[3..],
+            ),
             FresnelFamily::Conductor => {
-                let ior = [0, 1, 2].map(|c| ior_from_reflectivity_edge_tint(sigmoid(rest[c]), sigmoid(rest[3 + c])));
-                (FresnelSpec::Conductor { eta: ior.map(|p| p.0), k: ior.map(|p| p.1) }, &rest[6..])
+                let ior = [0, 1, 2].map(|c| {
+                    ior_from_reflectivity_edge_tint(sigmoid(rest[c]), sigmoid(rest[3 + c]))
+                });
+                (
+                    FresnelSpec::Conductor {
+                        eta: ior.map(|p| p.0),
+                        k: ior.map(|p| p.1),
+                    },
+                    &rest[6..],
+                )
             }
         };
-        let diffuse = if self.diffuse { [0, 1, 2].map(|c| sigmoid(rest[c])) } else { [0.0; 3] };
-        Material { model: self.model, ndf: self.ndf, height: self.height, alpha, fresnel, diffuse }
+        let diffuse = if self.diffuse {
+            [0, 1, 2].map(|c| sigmoid(rest[c]))
+        } else {
+            [0.0; 3]
+        };
+        Material {
+            model: self.model,
+            ndf: self.ndf,
+            height: self.height,
+            alpha,
+            fresnel,
+            diffuse,
+        }
     }
 
     /// Coordinates of a material (its Fresnel converted to this space's family through F0).
     pub fn point(&self, m: &Material) -> Vec<f64> {
-        let mut x = if self.anisotropic { vec![m.alpha[0].ln(), m.alpha[1].ln()] } else { vec![(m.alpha[0] * m.alpha[1]).sqrt().ln()] };
+        let mut x = if self.anisotropic {
+            vec![m.alpha[0].ln(), m.alpha[1].ln()]
+        } else {
+            vec![(m.alpha[0] * m.alpha[1]).sqrt().ln()]
+        };
         match (self.fresnel, m.fresnel) {
             (FresnelFamily::Conductor, FresnelSpec::Conductor { eta, k }) => {
                 let rg = [0, 1, 2].map(|c| reflectivity_edge_tint_from_ior(eta[c], k[c]));
@@ -121,8 +159,19 @@ mod tests {
 
     #[test]
     fn coordinates_round_trip() {
-        for (anisotropic, fresnel, diffuse) in [(false, FresnelFamily::Schlick, false), (true, FresnelFamily::Conductor, true), (false, FresnelFamily::Conductor, false)] {
-            let space = ParamSpace { model: Model::Single, ndf: NdfKind::Ggx, height: Height::Correlated, anisotropic, fresnel, diffuse };
+        for (anisotropic, fresnel, diffuse) in [
+            (false, FresnelFamily::Schlick, false),
+            (true, FresnelFamily::Conductor, true),
+            (false, FresnelFamily::Conductor, false),
+        ] {
+            let space = ParamSpace {
+                model: Model::Single,
+                ndf: NdfKind::Ggx,
+                height: Height::Correlated,
+                anisotropic,
+                fresnel,
+                diffuse,
+            };
             let x: Vec<f64> = (0..space.dim()).map(|i| 0.3 * i as f64 - 1.0).collect();
             let m = space.material(&x);
             m.validate().unwrap();

@@ -54,7 +54,11 @@ fn invert_visible_slope_cdf(u: f64, c: f64) -> f64 {
     if visible_slope_cdf(lo, c) >= target {
         return lo;
     }
-    let mut x = if c > 0.0 { 0.5 * (lo.max(-3.0) + c).min(c) } else { c - 1.0 };
+    let mut x = if c > 0.0 {
+        0.5 * (lo.max(-3.0) + c).min(c)
+    } else {
+        c - 1.0
+    };
     for _ in 0..100 {
         let f = visible_slope_cdf(x, c) - target;
         if f > 0.0 {
@@ -64,7 +68,11 @@ fn invert_visible_slope_cdf(u: f64, c: f64) -> f64 {
         }
         let slope = (c - x) * (-x * x).exp() * INV_SQRT_PI;
         let newton = x - f / slope;
-        let next = if slope > 0.0 && newton > lo && newton < hi { newton } else { 0.5 * (lo + hi) };
+        let next = if slope > 0.0 && newton > lo && newton < hi {
+            newton
+        } else {
+            0.5 * (lo + hi)
+        };
         if (next - x).abs() <= 1e-14 * (1.0 + x.abs()) {
             return next;
         }
@@ -80,14 +88,32 @@ fn erfinv(y: f64) -> f64 {
     let mut x = if w < 5.0 {
         let w = w - 2.5;
         let mut p = 2.810_226_36e-08;
-        for c in [3.432_739_39e-07, -3.523_387_7e-06, -4.391_506_54e-06, 2.185_808_7e-04, -1.253_725_03e-03, -4.177_681_64e-03, 2.466_407_27e-01, 1.501_409_41] {
+        for c in [
+            3.432_739_39e-07,
+            -3.523_387_7e-06,
+            -4.391_506_54e-06,
+            2.185_808_7e-04,
+            -1.253_725_03e-03,
+            -4.177_681_64e-03,
+            2.466_407_27e-01,
+            1.501_409_41,
+        ] {
             p = c + p * w;
         }
         p * y
     } else {
         let w = w.sqrt() - 3.0;
         let mut p = -2.002_142_57e-04;
-        for c in [1.009_505_58e-04, 1.349_343_22e-03, -3.673_428_44e-03, 5.739_507_73e-03, -7.622_461_3e-03, 9.438_870_47e-03, 1.001_674_06, 2.832_976_82] {
+        for c in [
+            1.009_505_58e-04,
+            1.349_343_22e-03,
+            -3.673_428_44e-03,
+            5.739_507_73e-03,
+            -7.622_461_3e-03,
+            9.438_870_47e-03,
+            1.001_674_06,
+            2.832_976_82,
+        ] {
             p = c + p * w;
         }
         p * y
@@ -166,7 +192,10 @@ mod tests {
             for &u in &[1e-9, 0.01, 0.3, 0.5, 0.97, 0.999999] {
                 let x = invert_visible_slope_cdf(u, c);
                 let got = visible_slope_cdf(x, c) / visible_slope_cdf(c, c);
-                assert!((got - u).abs() < 1e-10 * u.max(1e-3), "c = {c}, u = {u}: {got}");
+                assert!(
+                    (got - u).abs() < 1e-10 * u.max(1e-3),
+                    "c = {c}, u = {u}: {got}"
+                );
             }
         }
     }

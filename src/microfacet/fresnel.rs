@@ -106,7 +106,11 @@ pub fn reflectivity_edge_tint_from_ior(eta: f64, k: f64) -> (f64, f64) {
     let n_min = (1.0 - r) / (1.0 + r);
     let sr = r.sqrt();
     let n_max = (1.0 + sr) / (1.0 - sr);
-    let g = if n_max > n_min { (n_max - eta) / (n_max - n_min) } else { 0.0 };
+    let g = if n_max > n_min {
+        (n_max - eta) / (n_max - n_min)
+    } else {
+        0.0
+    };
     (r, g.clamp(0.0, 1.0))
 }
 
@@ -116,10 +120,19 @@ mod tests {
 
     #[test]
     fn gulbrandsen_round_trip_and_reflectivity() {
-        for &(eta, k) in &[(0.27, 3.61), (0.68, 2.63), (1.22, 2.29), (1.5, 7.6), (0.14, 3.98)] {
+        for &(eta, k) in &[
+            (0.27, 3.61),
+            (0.68, 2.63),
+            (1.22, 2.29),
+            (1.5, 7.6),
+            (0.14, 3.98),
+        ] {
             let (r, g) = reflectivity_edge_tint_from_ior(eta, k);
             let (eta2, k2) = ior_from_reflectivity_edge_tint(r, g);
-            assert!((eta - eta2).abs() < 1e-9 && (k - k2).abs() < 1e-9, "{eta},{k} -> {r},{g} -> {eta2},{k2}");
+            assert!(
+                (eta - eta2).abs() < 1e-9 && (k - k2).abs() < 1e-9,
+                "{eta},{k} -> {r},{g} -> {eta2},{k2}"
+            );
             assert!((conductor(1.0, eta2, k2) - r).abs() < 1e-12);
         }
     }
@@ -145,15 +158,28 @@ mod tests {
         let ci = (c, 0.0);
         let n_ci = mul(n, ci);
         let n_ct = mul(n, cos_t);
-        let r_parl = div((n_ci.0 - cos_t.0, n_ci.1 - cos_t.1), (n_ci.0 + cos_t.0, n_ci.1 + cos_t.1));
-        let r_perp = div((ci.0 - n_ct.0, ci.1 - n_ct.1), (ci.0 + n_ct.0, ci.1 + n_ct.1));
+        let r_parl = div(
+            (n_ci.0 - cos_t.0, n_ci.1 - cos_t.1),
+            (n_ci.0 + cos_t.0, n_ci.1 + cos_t.1),
+        );
+        let r_perp = div(
+            (ci.0 - n_ct.0, ci.1 - n_ct.1),
+            (ci.0 + n_ct.0, ci.1 + n_ct.1),
+        );
         let norm = |a: C| a.0 * a.0 + a.1 * a.1;
         0.5 * (norm(r_parl) + norm(r_perp))
     }
 
     #[test]
     fn conductor_matches_complex_amplitudes() {
-        for &(eta, k) in &[(0.2, 3.9), (1.1, 2.1), (0.05, 0.5), (2.5, 0.0), (0.27, 2.78), (9.0, 20.0)] {
+        for &(eta, k) in &[
+            (0.2, 3.9),
+            (1.1, 2.1),
+            (0.05, 0.5),
+            (2.5, 0.0),
+            (0.27, 2.78),
+            (9.0, 20.0),
+        ] {
             for i in 0..=20 {
                 let c = (i as f64 / 20.0).max(1e-6);
                 let a = conductor(c, eta, k);
@@ -172,7 +198,9 @@ mod tests {
         let eta = 1.5f64;
         assert!((dielectric(1.0, eta) - 0.04).abs() < 1e-14);
         assert!(1.0 - dielectric(1e-7, eta) < 1e-5);
-        let schlick = Fresnel::Schlick { f0: Rgb([0.9f64, 0.5, 0.1]) };
+        let schlick = Fresnel::Schlick {
+            f0: Rgb([0.9f64, 0.5, 0.1]),
+        };
         assert_eq!(schlick.eval(1.0).0, [0.9, 0.5, 0.1]);
         assert!(schlick.eval(0.0).0.iter().all(|&v| (v - 1.0).abs() < 1e-15));
     }

@@ -56,7 +56,9 @@ impl std::str::FromStr for NdfKind {
         match s {
             "ggx" => Ok(NdfKind::Ggx),
             "beckmann" => Ok(NdfKind::Beckmann),
-            _ => Err(format!("unknown distribution '{s}' (expected ggx or beckmann)")),
+            _ => Err(format!(
+                "unknown distribution '{s}' (expected ggx or beckmann)"
+            )),
         }
     }
 }
@@ -87,7 +89,9 @@ impl std::str::FromStr for Height {
         match s {
             "correlated" => Ok(Height::Correlated),
             "uncorrelated" => Ok(Height::Uncorrelated),
-            _ => Err(format!("unknown height model '{s}' (expected correlated or uncorrelated)")),
+            _ => Err(format!(
+                "unknown height model '{s}' (expected correlated or uncorrelated)"
+            )),
         }
     }
 }
@@ -173,7 +177,11 @@ impl<T: Real> Microfacet<T> {
 
     /// Masking-shadowing `G2(wi, wo, m)` for a reflection (both directions above the surface).
     pub fn g2(&self, wi: Vec3<T>, wo: Vec3<T>, m: Vec3<T>, height: Height) -> T {
-        if wi.dot(m).re64() <= 0.0 || wo.dot(m).re64() <= 0.0 || wi.z.re64() <= 0.0 || wo.z.re64() <= 0.0 {
+        if wi.dot(m).re64() <= 0.0
+            || wo.dot(m).re64() <= 0.0
+            || wi.z.re64() <= 0.0
+            || wo.z.re64() <= 0.0
+        {
             return T::zero();
         }
         self.g2_over_cosines(wi, wo, height) * wi.z * wo.z

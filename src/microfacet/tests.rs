@@ -21,7 +21,11 @@ fn warp(a: f64, u: f64, v: f64) -> (Vec3<f64>, f64) {
     let theta = (a * t).atan();
     let dtheta_dv = a * 0.5 * PI * (1.0 + t * t) / (1.0 + a * a * t * t);
     let phi = 2.0 * PI * u;
-    let m = Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+    let m = Vec3::new(
+        theta.sin() * phi.cos(),
+        theta.sin() * phi.sin(),
+        theta.cos(),
+    );
     (m, theta.sin() * dtheta_dv * 2.0 * PI)
 }
 
@@ -59,7 +63,10 @@ fn integrate_hemisphere(a: f64, nu: usize, nv: usize, g: impl Fn(Vec3<f64>) -> f
 }
 
 fn roughness_cases() -> Vec<(f64, f64)> {
-    let mut cases: Vec<(f64, f64)> = [0.01, 0.05, 0.2, 0.5, 1.0, 2.0].iter().map(|&a| (a, a)).collect();
+    let mut cases: Vec<(f64, f64)> = [0.01, 0.05, 0.2, 0.5, 1.0, 2.0]
+        .iter()
+        .map(|&a| (a, a))
+        .collect();
     cases.extend([(0.05, 0.4), (0.6, 0.1), (1.5, 0.3), (0.02, 0.2)]);
     cases
 }
@@ -70,7 +77,10 @@ fn distribution_is_normalised() {
         for (ax, ay) in roughness_cases() {
             let mf = Microfacet::new(ndf, ax, ay);
             let total = integrate_hemisphere((ax * ay).sqrt(), 400, 3000, |m| mf.d(m) * m.z);
-            assert!((total - 1.0).abs() < 1e-3, "{ndf:?} ax {ax} ay {ay}: {total}");
+            assert!(
+                (total - 1.0).abs() < 1e-3,
+                "{ndf:?} ax {ax} ay {ay}: {total}"
+            );
         }
     }
 }
@@ -81,10 +91,22 @@ fn projected_area_matches_quadrature_above_and_below_the_horizon() {
     for ndf in KINDS {
         for (ax, ay) in [(0.1f64, 0.1f64), (0.5, 0.5), (1.2, 1.2), (0.2, 0.8)] {
             let mf = Microfacet::new(ndf, ax, ay);
-            for w in [unit(0.0, 0.0), unit(40.0, 30.0), unit(80.0, 100.0), unit(89.9, 10.0), unit(95.0, 45.0), unit(130.0, 200.0)] {
-                let quad = integrate_hemisphere((ax * ay).sqrt(), 400, 3000, |m| w.dot(m).max(0.0) * mf.d(m));
+            for w in [
+                unit(0.0, 0.0),
+                unit(40.0, 30.0),
+                unit(80.0, 100.0),
+                unit(89.9, 10.0),
+                unit(95.0, 45.0),
+                unit(130.0, 200.0),
+            ] {
+                let quad = integrate_hemisphere((ax * ay).sqrt(), 400, 3000, |m| {
+                    w.dot(m).max(0.0) * mf.d(m)
+                });
                 let area = mf.projected_area(w);
-                assert!((quad - area).abs() < 2e-4 * area.max(0.05), "{ndf:?} {ax},{ay} w {w:?}: {quad} vs {area}");
+                assert!(
+                    (quad - area).abs() < 2e-4 * area.max(0.05),
+                    "{ndf:?} {ax},{ay} w {w:?}: {quad} vs {area}"
+                );
                 if w.z.abs() > 1e-3 {
                     let via_lambda = w.z * (1.0 + mf.lambda(w));
                     assert!((via_lambda - area).abs() < 1e-12 * area.max(1.0));
@@ -108,16 +130,33 @@ fn lambda_full_sphere_identity_and_closed_forms() {
         let ggx_ref = (-1.0 + (1.0 + 1.0 / (nu * nu)).sqrt()) / 2.0;
         let beck_ref = (libm::erf(nu) - 1.0) / 2.0 + (-nu * nu).exp() / (2.0 * nu * PI.sqrt());
         assert!((ggx.lambda(w) - ggx_ref).abs() < 1e-12 * ggx_ref.max(1e-3));
-        assert!((beck.lambda(w) - beck_ref).abs() < 1e-10 * beck_ref.max(1e-3), "{} {}", beck.lambda(w), beck_ref);
+        assert!(
+            (beck.lambda(w) - beck_ref).abs() < 1e-10 * beck_ref.max(1e-3),
+            "{} {}",
+            beck.lambda(w),
+            beck_ref
+        );
     }
 }
 
 #[test]
 fn visible_normal_density_integrates_to_one() {
     for ndf in KINDS {
-        for (ax, ay) in [(0.05f64, 0.05f64), (0.3, 0.3), (1.0, 1.0), (2.0, 2.0), (0.1, 0.6)] {
+        for (ax, ay) in [
+            (0.05f64, 0.05f64),
+            (0.3, 0.3),
+            (1.0, 1.0),
+            (2.0, 2.0),
+            (0.1, 0.6),
+        ] {
             let mf = Microfacet::new(ndf, ax, ay);
-            for w in [unit(0.0, 0.0), unit(45.0, 10.0), unit(85.0, 70.0), unit(100.0, 0.0), unit(150.0, 250.0)] {
+            for w in [
+                unit(0.0, 0.0),
+                unit(45.0, 10.0),
+                unit(85.0, 70.0),
+                unit(100.0, 0.0),
+                unit(150.0, 250.0),
+            ] {
                 if mf.projected_area(w) < 1e-12 {
                     // Nothing is visible in f64 (Beckmann alpha 0.05 from 150 deg: A ~ exp(-1200)).
                     assert_eq!(mf.pdf_visible(w, unit(89.0, 250.0)), 0.0);
@@ -125,7 +164,10 @@ fn visible_normal_density_integrates_to_one() {
                 }
                 let a = warp_scale(&mf, w);
                 let total = integrate_hemisphere(a, 400, 3000, |m| mf.pdf_visible(w, m));
-                assert!((total - 1.0).abs() < 1e-3, "{ndf:?} {ax},{ay} w {w:?}: {total}");
+                assert!(
+                    (total - 1.0).abs() < 1e-3,
+                    "{ndf:?} {ax},{ay} w {w:?}: {total}"
+                );
             }
         }
     }
@@ -148,9 +190,15 @@ fn chi_square_of_sampler(mf: Microfacet<f64>, w: Vec3<f64>, seed: u64) -> f64 {
     for _ in 0..n {
         let m = mf.sample_visible(w, [rng.random(), rng.random()]);
         assert!(m.z >= 0.0 && (m.length() - 1.0).abs() < 1e-9);
-        assert!(mf.pdf_visible(w, m) > 0.0, "sampled an invisible normal {m:?} for {w:?}");
+        assert!(
+            mf.pdf_visible(w, m) > 0.0,
+            "sampled an invisible normal {m:?} for {w:?}"
+        );
         let (u, v) = unwarp(a, m);
-        let (i, j) = ((u * bins_u as f64) as usize, ((v * bins_v as f64) as usize).min(bins_v - 1));
+        let (i, j) = (
+            (u * bins_u as f64) as usize,
+            ((v * bins_v as f64) as usize).min(bins_v - 1),
+        );
         observed[j * bins_u + i] += 1.0;
     }
     let mut expected = vec![0.0; bins_u * bins_v];
@@ -166,15 +214,28 @@ fn chi_square_of_sampler(mf: Microfacet<f64>, w: Vec3<f64>, seed: u64) -> f64 {
         }
         s / (sub * sub * bins_u * bins_v) as f64
     };
-    let coarse: Vec<f64> = (0..bins_u * bins_v).map(|k| bin_mass(k % bins_u, k / bins_u, 12)).collect();
+    let coarse: Vec<f64> = (0..bins_u * bins_v)
+        .map(|k| bin_mass(k % bins_u, k / bins_u, 12))
+        .collect();
     for j in 0..bins_v {
         for i in 0..bins_u {
             // Bins holding much of the mass need their integral to better than 1/sqrt(count);
             // bins on the edge of the visible region may hold a sliver the coarse grid misses.
             let k = j * bins_u + i;
-            let neighbours = [(i + bins_u - 1) % bins_u + j * bins_u, (i + 1) % bins_u + j * bins_u, k.saturating_sub(bins_u), (k + bins_u).min(bins_u * bins_v - 1)];
-            let on_edge = neighbours.iter().any(|&q| (coarse[q] > 0.0) != (coarse[k] > 0.0));
-            let mass = if coarse[k] > 0.01 || on_edge { bin_mass(i, j, 160) } else { coarse[k] };
+            let neighbours = [
+                (i + bins_u - 1) % bins_u + j * bins_u,
+                (i + 1) % bins_u + j * bins_u,
+                k.saturating_sub(bins_u),
+                (k + bins_u).min(bins_u * bins_v - 1),
+            ];
+            let on_edge = neighbours
+                .iter()
+                .any(|&q| (coarse[q] > 0.0) != (coarse[k] > 0.0));
+            let mass = if coarse[k] > 0.01 || on_edge {
+                bin_mass(i, j, 160)
+            } else {
+                coarse[k]
+            };
             expected[k] = mass * n as f64;
         }
     }
@@ -200,7 +261,13 @@ fn visible_normal_sampler_matches_its_density() {
     let mut seed = 7;
     for ndf in KINDS {
         for (ax, ay) in [(0.08, 0.08), (0.4, 0.4), (1.3, 1.3), (0.15, 0.7)] {
-            for w in [unit(0.0, 0.0), unit(35.0, 60.0), unit(80.0, 200.0), unit(120.0, 30.0), unit(170.0, 300.0)] {
+            for w in [
+                unit(0.0, 0.0),
+                unit(35.0, 60.0),
+                unit(80.0, 200.0),
+                unit(120.0, 30.0),
+                unit(170.0, 300.0),
+            ] {
                 seed += 1;
                 let mf = Microfacet::new(ndf, ax, ay);
                 if mf.projected_area(w) < 1e-12 {
@@ -232,7 +299,11 @@ fn chi_square_rejects_a_wrong_sampler() {
     for (j, o) in obs.iter().enumerate() {
         let e = integrate_hemisphere(0.4, 64, 64, |m| {
             let (_, v) = unwarp(0.4, m);
-            if ((v * bins as f64) as usize).min(bins - 1) == j { claimed.pdf_visible(w, m) } else { 0.0 }
+            if ((v * bins as f64) as usize).min(bins - 1) == j {
+                claimed.pdf_visible(w, m)
+            } else {
+                0.0
+            }
         }) * n as f64;
         chi2 += (o - e).powi(2) / e.max(1.0);
     }
@@ -251,17 +322,35 @@ fn dual_numbers_give_the_derivative_of_the_kernel() {
         let h = 1e-6;
         let f = |a: f64| {
             let mf = Microfacet::new(ndf, a, a * 0.7);
-            (mf.d(m), mf.lambda(wi), mf.pdf_visible(wi, m), mf.sample_visible(wi, u).x)
+            (
+                mf.d(m),
+                mf.lambda(wi),
+                mf.pdf_visible(wi, m),
+                mf.sample_visible(wi, u).x,
+            )
         };
         let (p, q) = (f(alpha + h), f(alpha - h));
-        let fd = [(p.0 - q.0) / (2.0 * h), (p.1 - q.1) / (2.0 * h), (p.2 - q.2) / (2.0 * h), (p.3 - q.3) / (2.0 * h)];
+        let fd = [
+            (p.0 - q.0) / (2.0 * h),
+            (p.1 - q.1) / (2.0 * h),
+            (p.2 - q.2) / (2.0 * h),
+            (p.3 - q.3) / (2.0 * h),
+        ];
         let a = Dual64::from_re(alpha).derivative();
         let mf = Microfacet::new(ndf, a, a * Dual64::from_re(0.7));
         let wi_d = Vec3::from_f64(wi.re());
         let m_d = Vec3::from_f64(m.re());
-        let exact = [mf.d(m_d).eps, mf.lambda(wi_d).eps, mf.pdf_visible(wi_d, m_d).eps, mf.sample_visible(wi_d, u).x.eps];
+        let exact = [
+            mf.d(m_d).eps,
+            mf.lambda(wi_d).eps,
+            mf.pdf_visible(wi_d, m_d).eps,
+            mf.sample_visible(wi_d, u).x.eps,
+        ];
         for (e, d) in exact.iter().zip(fd) {
-            assert!((e - d).abs() < 1e-6 * d.abs().max(1.0), "{ndf:?}: dual {exact:?} vs fd {fd:?}");
+            assert!(
+                (e - d).abs() < 1e-6 * d.abs().max(1.0),
+                "{ndf:?}: dual {exact:?} vs fd {fd:?}"
+            );
         }
     }
 }
@@ -271,7 +360,10 @@ fn f32_kernel_agrees_with_f64() {
     for ndf in KINDS {
         let mf64 = Microfacet::new(ndf, 0.3, 0.5);
         let mf32 = Microfacet::new(ndf, 0.3f32, 0.5f32);
-        for (wi, m) in [(unit(10.0, 5.0), unit(5.0, 100.0)), (unit(75.0, 40.0), unit(30.0, 220.0))] {
+        for (wi, m) in [
+            (unit(10.0, 5.0), unit(5.0, 100.0)),
+            (unit(75.0, 40.0), unit(30.0, 220.0)),
+        ] {
             let w32 = Vec3::new(wi.x as f32, wi.y as f32, wi.z as f32);
             let m32 = Vec3::new(m.x as f32, m.y as f32, m.z as f32);
             let rel = |a: f32, b: f64| ((a as f64 - b) / b).abs();
@@ -286,9 +378,17 @@ fn kernel_is_finite_at_grazing_and_extreme_roughness() {
     for ndf in KINDS {
         for a in [1e-4, 1e-2, 1.0, 3.0] {
             let mf = Microfacet::new(ndf, a, a);
-            for w in [Vec3::new(1.0, 0.0, 0.0), unit(89.999, 10.0), unit(0.0, 0.0), unit(90.001, 0.0)] {
+            for w in [
+                Vec3::new(1.0, 0.0, 0.0),
+                unit(89.999, 10.0),
+                unit(0.0, 0.0),
+                unit(90.001, 0.0),
+            ] {
                 let area = mf.projected_area(w);
-                assert!(area.is_finite() && area > 0.0, "{ndf:?} a {a} w {w:?}: {area}");
+                assert!(
+                    area.is_finite() && area > 0.0,
+                    "{ndf:?} a {a} w {w:?}: {area}"
+                );
                 let m = mf.sample_visible(w, [0.3, 0.6]);
                 assert!(m.re().iter().all(|v| v.is_finite()));
                 assert!(mf.d(m).is_finite() && mf.pdf_visible(w, m).is_finite());

@@ -1,0 +1,267 @@
+//! The command-line contract of DESIGN.md: JSON fields, round trips, and bad input.
+
+mod common;
+use common::*;
+
+const COPPER: &str = "conductor:0.2378,1.0066,1.2404:3.6264,2.5823,2.3929";
+
+fn brdf_json(args: &[&str]) -> serde_json::Value {
+    let mut all = vec!["brdf", "--json"];
+    all.extend_from_slice(args);
+    serde_json::from_str(&run_ok(&all)).unwrap()
+}
+
+#[test]
+fn brdf_json_has_the_contract_fields_and_consistent_values() {
+    let v = brdf_json(&[
+        "--model",
+        "single",
+        "--alpha",
+        "0.3",
+        "--fresnel",
+        COPPER,
+        "--wi",
+        "1,0,2",
+        "--wo",
+        "-0.3,0.4,1",
+    ]);
+    for key in [
+        "model", "ndf", "alpha", "wi", "wo", "f", "f_cos", "f_single", "f_multi", "stderr",
+        "samples", "seconds",
+    ] {
+        assert!(!v[key].is_null(), "missing {key}");
+    }
+    let wo = triple(&v["wo"]);
+    assert!(
+        (wo.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() < 1e-12,
+        "directions are normalised"
+    );
+    let (f, fc, fs, fm) = (
+        triple(&v["f"]),
+        triple(&v["f_cos"]),
+        triple(&v["f_single"]),
+        triple(&v["f_multi"]),
+    );
+    for c in 0..3 {
+        assert!((f[c] - fs[c] - fm[c]).abs() < 1e-15);
+        assert!((fc[c] - f[c] * wo[2]).abs() < 1e-15);
+        assert!(f[c] > 0.0);
+    }
+    // Reciprocity through the CLI.
+    let swapped = brdf_json(&[
+        "--model",
+        "single",
+        "--alpha",
+        "0.3",
+        "--fresnel",
+        COPPER,
+        "--wi",
+        "-0.3,0.4,1",
+        "--wo",
+        "1,0,2",
+    ]);
+    let g = triple(&swapped["f"]);
+    for c in 0..3 {
+        assert!((f[c] - g[c]).abs() < 1e-12 * f[c]);
+    }
+    let aniso = brdf_json(&[
+        "--model",
+        "single",
+        "--ndf",
+        "beckmann",
+        "--alpha-x",
+        "0.1",
+        "--alpha-y",
+        "0.5",
+        "--wi",
+        "0,0,1",
+        "--wo",
+        "0.2,0,1",
+        "--height",
+        "uncorrelated",
+    ]);
+    assert_eq!(aniso["alpha"], serde_json::json!([0.1, 0.5]));
+}
+
+#[test]
+fn albedo_json_reports_energy_loss_of_single() {
+    let out = run_ok(&[
+        "albedo",
+        "--model",
+        "single",
+        "--alpha",
+        "1.0",
+        "--theta-i",
+        "60",
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    for key in ["model", "theta_i_deg", "albedo", "stderr", "samples"] {
+        assert!(!v[key].is_null(), "missing {key}");
+    }
+    let a = triple(&v["albedo"]);
+    assert!(
+        a[0] < 0.8 && a[0] > 0.2,
+        "white albedo of single at alpha 1 is well below 1: {a:?}"
+    );
+    assert!(triple(&v["stderr"])[0] < 1e-3);
+}
+
+#[test]
+fn render_of_the_true_material_reproduces_the_bundled_photos() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("render");
+    run_ok(&[
+        "render",
+        "--capture",
+        repo("datasets/copper-flash").to_str().unwrap(),
+        "--material",
+        repo("datasets/copper-flash/material.json")
+            .to_str()
+            .unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    for i in 0..9 {
+        let load = |p: std::path::PathBuf| {
+            bouncefit::capture::image_io::load_image(&p, bouncefit::capture::ColorEncoding::Linear)
+                .unwrap()
+        };
+        let rendered = load(out.join(format!("{i:02}.exr")));
+        let bundled = load(repo(&format!("datasets/copper-flash/{i:02}.exr")));
+        // Bit-identical pixels: the same records, the same arithmetic, the same f32 rounding.
+        assert!(rendered.rgb == bundled.rgb, "photo {i} differs");
+        assert!(out.join(format!("{i:02}.png")).exists());
+    }
+}
+
+#[test]
+fn bad_input_exits_2_with_a_named_cause_and_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = out.to_str().unwrap();
+    let bad_manifest = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad_manifest,
+        "name = \"x\"\nunits = \"cm\"\n[sample]\nwidth = -1.0\nheight = 1.0\n",
+    )
+    .unwrap();
+    let bad_material = dir.path().join("bad.json");
+    std::fs::write(
+        &bad_material,
+        r#"{"model":"single","alpha":[-0.1,0.2],"fresnel":{"kind":"white"}}"#,
+    )
+    .unwrap();
+    let capture = repo("datasets/sources/copper-flash.capture.toml");
+    let material = repo("datasets/sources/copper-a03.material.json");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec![
+                "brdf", "--model", "nonsense", "--alpha", "0.1", "--wi", "0,0,1", "--wo", "0,0,1",
+            ],
+            "nonsense",
+        ),
+        (
+            vec![
+                "brdf", "--model", "single", "--alpha", "0.1", "--wi", "0,0,-1", "--wo", "0,0,1",
+            ],
+            "--wi",
+        ),
+        (
+            vec![
+                "brdf", "--model", "single", "--alpha", "-1", "--wi", "0,0,1", "--wo", "0,0,1",
+            ],
+            "alpha",
+        ),
+        (
+            vec![
+                "brdf",
+                "--model",
+                "single",
+                "--alpha",
+                "0.1",
+                "--fresnel",
+                "gold",
+                "--wi",
+                "0,0,1",
+                "--wo",
+                "0,0,1",
+            ],
+            "--fresnel",
+        ),
+        (
+            vec![
+                "albedo",
+                "--model",
+                "single",
+                "--alpha",
+                "0.1",
+                "--theta-i",
+                "95",
+            ],
+            "--theta-i",
+        ),
+        (
+            vec![
+                "synth",
+                "--material",
+                "/nonexistent/m.json",
+                "--capture",
+                capture.to_str().unwrap(),
+                "-o",
+                o,
+            ],
+            "/nonexistent/m.json",
+        ),
+        (
+            vec![
+                "synth",
+                "--material",
+                bad_material.to_str().unwrap(),
+                "--capture",
+                capture.to_str().unwrap(),
+                "-o",
+                o,
+            ],
+            "alpha",
+        ),
+        (
+            vec![
+                "synth",
+                "--material",
+                material.to_str().unwrap(),
+                "--capture",
+                bad_manifest.to_str().unwrap(),
+                "-o",
+                o,
+            ],
+            "bad.toml",
+        ),
+        (
+            vec!["fit", "/nonexistent-folder", "-o", o],
+            "/nonexistent-folder",
+        ),
+        (
+            vec![
+                "render",
+                "--capture",
+                capture.to_str().unwrap(),
+                "--material",
+                material.to_str().unwrap(),
+                "-o",
+                o,
+                "--pixel-samples",
+                "3",
+            ],
+            "pixel",
+        ),
+    ];
+    for (args, needle) in cases {
+        let stderr = run_bad(&args);
+        assert!(
+            stderr.contains(needle),
+            "bouncefit {args:?}: message should name '{needle}':\n{stderr}"
+        );
+        assert!(!out.exists(), "bouncefit {args:?} left output behind");
+    }
+}

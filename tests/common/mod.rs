@@ -1,0 +1,60 @@
+//! Helpers shared by the integration tests: run the binary, read JSON, compare with truth.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bouncefit"))
+}
+
+pub fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
+}
+
+/// Run the binary, assert success, return stdout.
+pub fn run_ok(args: &[&str]) -> String {
+    let out = bin().args(args).output().expect("binary runs");
+    assert!(
+        out.status.success(),
+        "bouncefit {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// Run the binary expecting the bad-input exit status 2 without a panic; returns stderr.
+pub fn run_bad(args: &[&str]) -> String {
+    let out: Output = bin().args(args).output().expect("binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "bouncefit {args:?} should exit 2, stderr:\n{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "panic on bad input: {stderr}");
+    stderr
+}
+
+pub fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+pub fn triple(v: &serde_json::Value) -> [f64; 3] {
+    [0, 1, 2].map(|i| v[i].as_f64().unwrap())
+}
+
+/// F0 of a material file's Fresnel.
+pub fn material_f0(material: &serde_json::Value) -> [f64; 3] {
+    let fresnel = &material["fresnel"];
+    match fresnel["kind"].as_str().unwrap() {
+        "conductor" => {
+            let (eta, k) = (triple(&fresnel["eta"]), triple(&fresnel["k"]));
+            [0, 1, 2].map(|c| {
+                ((eta[c] - 1.0).powi(2) + k[c] * k[c]) / ((eta[c] + 1.0).powi(2) + k[c] * k[c])
+            })
+        }
+        "schlick" => triple(&fresnel["f0"]),
+        other => panic!("no F0 for {other}"),
+    }
+}
