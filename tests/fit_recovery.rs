@@ -215,3 +215,22 @@ fn materialgan_format_set_is_imported_and_fitted() {
         std::fs::remove_file(dir.path().join("fit.json")).unwrap();
     }
 }
+
+#[test]
+fn log_l1_loss_recovers_alpha_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth = read_json(&repo("datasets/copper-flash/material.json"));
+    let r = fit(
+        &repo("datasets/copper-flash"),
+        &["--loss", "log-l1"],
+        dir.path(),
+    );
+    assert_close(
+        "alpha",
+        r.alpha[0],
+        truth["alpha"][0].as_f64().unwrap(),
+        0.01,
+    );
+    assert_f0(r.f0, material_f0(&truth), 0.01);
+    assert_eq!(r.fit["loss_kind"], "log-l1");
+}

@@ -11,6 +11,8 @@
 
 pub mod single;
 #[cfg(test)]
+pub(crate) mod testing;
+#[cfg(test)]
 mod tests;
 
 use crate::scalar::Vec3;
@@ -40,8 +42,11 @@ pub struct BrdfSample {
     pub wo: Vec3<f64>,
     /// `f(wi, wo) * wo.z / pdf(wo)` per channel (for stochastic models an unbiased estimate).
     pub weight: [f64; 3],
-    /// Density of `wo` in solid angle (1/sr).
+    /// Density of `wo` in solid angle (1/sr); for stochastic models the density used for
+    /// multiple importance sampling, which each model documents (it may be approximate).
     pub pdf: f64,
+    /// Number of microfacet reflections on the sampled path (1 for the single-bounce lobe).
+    pub bounces: u32,
 }
 
 /// The interface every model implements.

@@ -81,6 +81,7 @@ impl Brdf for SingleBounce<f64> {
             wo,
             weight: weight.0,
             pdf: SingleBounce::pdf(self, wi, wo),
+            bounces: 1,
         })
     }
 

@@ -37,20 +37,21 @@ const COPPER: FresnelSpec = FresnelSpec::Conductor {
 
 #[test]
 fn single_is_reciprocal() {
-    let mut rng = rng_stream(1, 0);
+    use super::testing::{mean_eval, random_configurations, z_score};
     for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
         for height in [Height::Correlated, Height::Uncorrelated] {
-            for _ in 0..200 {
-                let a = [rng.random_range(0.01..2.0), rng.random_range(0.01..2.0)];
-                let m = single(ndf, a[0], a[1], COPPER, height);
-                let wi = unit(rng.random_range(0.0..89.9), rng.random_range(0.0..360.0));
-                let wo = unit(rng.random_range(0.0..89.9), rng.random_range(0.0..360.0));
-                let (f, g) = (m.eval(wi, wo).0, m.eval(wo, wi).0);
+            for (k, (alpha, wi, wo)) in random_configurations(300, 1).into_iter().enumerate() {
+                let m = single(
+                    ndf,
+                    alpha,
+                    alpha * (0.2 + (k % 5) as f64 * 0.2),
+                    COPPER,
+                    height,
+                );
+                let (f, g) = (mean_eval(&m, wi, wo, 1, 0), mean_eval(&m, wo, wi, 1, 0));
                 for c in 0..3 {
-                    assert!(
-                        (f[c] - g[c]).abs() <= 1e-12 * f[c].abs().max(1e-300),
-                        "{f:?} vs {g:?}"
-                    );
+                    // Analytic: exact up to rounding (z_score is 0 within 1e-12 relative).
+                    assert_eq!(z_score(&f, &g, c), 0.0, "{f:?} vs {g:?}");
                 }
             }
         }
@@ -248,4 +249,73 @@ fn brdf_is_finite_and_non_negative_at_extremes() {
         }
     }
     let _ = Rgb([0.0f64; 3]);
+}
+
+#[test]
+fn harness_agrees_on_single_and_rejects_a_mismatch() {
+    use super::testing::*;
+    for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
+        let m = single(ndf, 0.5, 0.5, COPPER, Height::Correlated);
+        let guide = single(ndf, 0.5, 0.5, FresnelSpec::White, Height::Correlated);
+        for theta in [0.0, 40.0, 75.0] {
+            let wi = unit(theta, 30.0);
+            let by_sampling = albedo_by_sampling(&m, wi, 65_536, 1);
+            let by_eval = albedo_by_eval(&m, &guide, wi, 200_000, 2);
+            for c in 0..3 {
+                // The quadrature side is exact to ~1e-5; the eval side carries MC error.
+                assert!(
+                    z_score(&by_sampling, &by_eval, c) < 4.0,
+                    "{ndf:?} theta {theta}: {by_sampling:?} vs {by_eval:?}"
+                );
+            }
+        }
+        let z = sampler_matches_eval(&m, unit(35.0, 10.0), 400_000, 64, 3);
+        assert!(z < 4.0, "{ndf:?}: sampler vs eval z = {z}");
+    }
+    // A sampler of alpha 0.5 checked against the evaluation of alpha 0.6 must be rejected.
+    struct Mismatched(SingleBounce<f64>, SingleBounce<f64>);
+    impl Brdf for Mismatched {
+        fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
+            Brdf::eval(&self.1, wi, wo, rng)
+        }
+        fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {
+            Brdf::sample(&self.0, wi, u, rng)
+        }
+        fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
+            Brdf::pdf(&self.0, wi, wo)
+        }
+    }
+    let wrong = Mismatched(
+        single(NdfKind::Ggx, 0.5, 0.5, COPPER, Height::Correlated),
+        single(NdfKind::Ggx, 0.6, 0.6, COPPER, Height::Correlated),
+    );
+    assert!(sampler_matches_eval(&wrong, unit(35.0, 10.0), 400_000, 64, 3) > 10.0);
+}
+
+#[test]
+fn single_survives_the_finite_sweep() {
+    use super::testing::assert_finite_sweep;
+    assert_finite_sweep(
+        |rng| {
+            let a = 10f64.powf(rng.random_range(-4.0..0.48));
+            let ndf = if rng.random::<bool>() {
+                NdfKind::Ggx
+            } else {
+                NdfKind::Beckmann
+            };
+            let fresnel = FresnelSpec::Conductor {
+                eta: [rng.random_range(0.01..10.0); 3],
+                k: [rng.random_range(0.0..20.0); 3],
+            };
+            Box::new(single(
+                ndf,
+                a,
+                a * rng.random_range(0.01..1.0),
+                fresnel,
+                Height::Correlated,
+            ))
+        },
+        1_000_000,
+        9,
+    );
 }
