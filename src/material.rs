@@ -186,6 +186,13 @@ impl Material {
     pub fn brdf(&self) -> Box<dyn Brdf> {
         match self.model {
             Model::Single => Box::new(self.single::<f64>()),
+            Model::FastMsx => Box::new(crate::bsdf::fast_msx::FastMsx {
+                single: self.single::<f64>(),
+            }),
+            Model::KullaConty => Box::new(crate::bsdf::kulla_conty::KullaConty::new(
+                self.single::<f64>(),
+            )),
+            Model::Turquin => Box::new(crate::bsdf::turquin::Turquin::new(self.single::<f64>())),
         }
     }
 }

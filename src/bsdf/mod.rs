@@ -8,12 +8,22 @@
 //! | model | file | kind |
 //! | --- | --- | --- |
 //! | `single` | [`single`] | analytic, Walter et al. 2007 |
+//! | `fast-msx` | [`fast_msx`] | analytic second bounce, Rosales et al. 2023; not energy conserving, not reciprocal |
+//! | `kulla-conty` | [`kulla_conty`] | tabulated energy compensation lobe, Kulla & Conty 2017; reciprocal |
+//! | `turquin` | [`turquin`] | tabulated scaling of the single lobe, Turquin 2019; not reciprocal |
 
+pub mod albedo_table;
+#[cfg(test)]
+mod compensation_tests;
+pub mod fast_msx;
+pub mod kulla_conty;
+pub mod lobe_mixture;
 pub mod single;
 #[cfg(test)]
 pub(crate) mod testing;
 #[cfg(test)]
 mod tests;
+pub mod turquin;
 
 use crate::scalar::Vec3;
 use serde::{Deserialize, Serialize};
@@ -75,14 +85,28 @@ pub trait Brdf: Send + Sync {
 pub enum Model {
     /// Walter et al. 2007: analytic, loses the energy of multiple bounces.
     Single,
+    /// Rosales et al. 2023: single plus an analytic second-bounce lobe.
+    FastMsx,
+    /// Kulla & Conty 2017: single plus a tabulated compensation lobe.
+    KullaConty,
+    /// Turquin 2019: single scaled by a tabulated compensation factor.
+    Turquin,
 }
 
 impl Model {
-    pub const ALL: [Model; 1] = [Model::Single];
+    pub const ALL: [Model; 4] = [
+        Model::Single,
+        Model::FastMsx,
+        Model::KullaConty,
+        Model::Turquin,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             Model::Single => "single",
+            Model::FastMsx => "fast-msx",
+            Model::KullaConty => "kulla-conty",
+            Model::Turquin => "turquin",
         }
     }
 }

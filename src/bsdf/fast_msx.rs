@@ -1,0 +1,99 @@
+//! `fast-msx`: Fast-MSX (Rosales et al. 2023, `papers/rosales2023-fast-msx.md`), the single-bounce
+//! BRDF plus an analytic second-bounce lobe from asymmetric V-cavities.
+//!
+//! | parameter | unit / range | meaning |
+//! | --- | --- | --- |
+//! | `alpha` (`ax`, `ay`) | > 0 | roughness of both the direct lobe and `D_I` |
+//! | `ndf`, `height`, `fresnel` | as `single` | the direct lobe is exactly `single` |
+//!
+//! Deterministic, analytic, biased (an approximation of multiple scattering, not energy
+//! conserving), not reciprocal (`G_I` masks only toward the camera, sec. 4.2.1). With `l = wi`
+//! (light) and `v = wo` (camera):
+//! - cavity axis `c = normalize(h + n)` (eq. 9), half opening `theta_m = (pi - acos(v.l)) / 4`
+//!   (eq. 5 and 16, as in Algorithm 1);
+//! - `G_I = 1 - max(0, sin(theta_vc - theta_m) / sin(theta_vc + theta_m))` (eq. 17, Algorithm 1);
+//! - `D_I` = the surface's distribution at a normal tilted by `theta_m` toward the azimuth of
+//!   `h` (eq. 18 is GGX at `cos theta_m`; for Beckmann and anisotropic surfaces the kernel's `D`
+//!   at that normal is the same construction);
+//! - `F_I = F(wi.h)^2` (eq. 19);
+//! - `f_I = D_I G_I F_I / (2 c.v)` (eq. 20), added to `f_single`.
+//!
+//! The angles depend on the directions only and are computed in `f64`, so dual numbers carry
+//! derivatives with respect to roughness and Fresnel without passing through `acos` at 1
+//! (the flash geometry `wi = wo`). Sampling: [`super::lobe_mixture`] (the paper uses the visible
+//! normals of the direct lobe, sec. 4.4; the mixture adds a cosine lobe so the weight of the
+//! broader indirect lobe stays bounded).
+
+use super::single::SingleBounce;
+use super::{lobe_mixture, Brdf, BrdfSample, BrdfValue, Rng};
+use crate::scalar::{Real, Rgb, Vec3};
+use std::f64::consts::PI;
+
+#[derive(Clone, Copy, Debug)]
+pub struct FastMsx<T> {
+    pub single: SingleBounce<T>,
+}
+
+impl<T: Real> FastMsx<T> {
+    /// The indirect second-bounce lobe `f_I` (eq. 20), 1/sr.
+    pub fn indirect(&self, wi: Vec3<T>, wo: Vec3<T>) -> Rgb<T> {
+        let zero = Rgb::splat(T::zero());
+        if wi.z.re64() <= 0.0 || wo.z.re64() <= 0.0 {
+            return zero;
+        }
+        let (l, v) = (
+            Vec3::<f64>::from_f64(wi.re()),
+            Vec3::<f64>::from_f64(wo.re()),
+        );
+        let h = (l + v).normalize();
+        let c = (h + Vec3::new(0.0, 0.0, 1.0)).normalize();
+        let cos_vc = c.dot(v).clamp(-1.0, 1.0);
+        let theta_vc = cos_vc.acos();
+        let theta_m = (PI - v.dot(l).clamp(-1.0, 1.0).acos()) * 0.25;
+        let g_i = 1.0 - ((theta_vc - theta_m).sin() / (theta_vc + theta_m).sin()).max(0.0);
+        if g_i <= 0.0 || cos_vc <= 0.0 {
+            return zero;
+        }
+        let horizontal = (h.x * h.x + h.y * h.y).sqrt();
+        let (cos_phi, sin_phi) = if horizontal > 0.0 {
+            (h.x / horizontal, h.y / horizontal)
+        } else {
+            (1.0, 0.0)
+        };
+        let m_i = Vec3::from_f64([
+            theta_m.sin() * cos_phi,
+            theta_m.sin() * sin_phi,
+            theta_m.cos(),
+        ]);
+        let d_i = self.single.microfacet.d(m_i);
+        let f = self.single.fresnel.eval(T::c(l.dot(h)));
+        let scalar = d_i * T::c(g_i / (2.0 * cos_vc));
+        (f * f).scale(scalar)
+    }
+
+    /// `(f_single, f_I)`.
+    pub fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>) -> (Rgb<T>, Rgb<T>) {
+        (self.single.eval(wi, wo), self.indirect(wi, wo))
+    }
+}
+
+impl Brdf for FastMsx<f64> {
+    fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, _rng: &mut Rng) -> BrdfValue {
+        let (single, multi) = self.eval_split(wi, wo);
+        BrdfValue {
+            single: single.0,
+            multi: multi.0,
+        }
+    }
+
+    fn sample(&self, wi: Vec3<f64>, u: [f64; 2], _rng: &mut Rng) -> Option<BrdfSample> {
+        lobe_mixture::sample(&self.single, wi, u, |wo| {
+            let (s, m) = self.eval_split(wi, wo);
+            (s + m).0
+        })
+    }
+
+    fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
+        lobe_mixture::pdf(&self.single, wi, wo)
+    }
+}
