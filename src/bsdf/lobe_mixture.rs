@@ -43,7 +43,7 @@ pub fn sample(
         Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - v).max(0.0).sqrt())
     };
     let density = pdf(single, wi, wo);
-    if !(density > 0.0) {
+    if density.is_nan() || density <= 0.0 {
         return None;
     }
     let f = eval(wo);
