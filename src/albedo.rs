@@ -109,3 +109,61 @@ fn stratified_monte_carlo(brdf: &dyn Brdf, wi: Vec3<f64>, n: usize, seed: u64) -
         samples: n * n,
     }
 }
+
+/// Directional albedo split by path length: `[bounce 1, bounce 2, bounce 3, bounces 4+]` per
+/// channel, from the sampler's bounce counts. Models without path structure (analytic
+/// compensation lobes, `bounces == 0`) are split through `eval` into the exact single-bounce part
+/// (column 1) and everything else (column 2, with `resolved = false`).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct BounceEnergy {
+    pub by_bounce: [[f64; 3]; 4],
+    pub resolved: bool,
+    pub samples: usize,
+}
+
+pub fn albedo_by_bounce(brdf: &dyn Brdf, wi: Vec3<f64>, samples: usize, seed: u64) -> BounceEnergy {
+    let n = (samples.max(4) as f64).sqrt().ceil() as usize;
+    let rows: Vec<([[f64; 3]; 4], bool)> = (0..n)
+        .into_par_iter()
+        .map(|j| {
+            let mut rng = rng_stream(seed, j as u64);
+            let mut acc = [[0.0; 3]; 4];
+            let mut resolved = true;
+            for i in 0..n {
+                let u = [
+                    (i as f64 + rng.random::<f64>()) / n as f64,
+                    (j as f64 + rng.random::<f64>()) / n as f64,
+                ];
+                let Some(s) = brdf.sample(wi, u, &mut rng) else {
+                    continue;
+                };
+                if s.bounces == 0 {
+                    resolved = false;
+                    let v = brdf.eval(wi, s.wo, &mut rng);
+                    for c in 0..3 {
+                        acc[0][c] += v.single[c] * s.wo.z / s.pdf;
+                        acc[1][c] += v.multi[c] * s.wo.z / s.pdf;
+                    }
+                } else {
+                    let k = (s.bounces as usize).min(4) - 1;
+                    (0..3).for_each(|c| acc[k][c] += s.weight[c]);
+                }
+            }
+            (acc, resolved)
+        })
+        .collect();
+    let total = (n * n) as f64;
+    let mut by_bounce = [[0.0; 3]; 4];
+    for (acc, _) in &rows {
+        for k in 0..4 {
+            for c in 0..3 {
+                by_bounce[k][c] += acc[k][c] / total;
+            }
+        }
+    }
+    BounceEnergy {
+        by_bounce,
+        resolved: rows.iter().all(|r| r.1),
+        samples: n * n,
+    }
+}

@@ -22,6 +22,8 @@ enum Command {
     Brdf(commands::brdf::BrdfArgs),
     /// Directional albedo of a BRDF at one incidence angle.
     Albedo(commands::brdf::AlbedoArgs),
+    /// Picture of a model's lobe and its albedo split by bounce count.
+    Lobe(commands::lobe::LobeArgs),
     /// Make a synthetic photo set from a material and a capture manifest.
     Synth(commands::synth::SynthArgs),
     /// Re-render a photo set with a material or fit.
@@ -35,6 +37,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Brdf(args) => commands::brdf::run_brdf(args),
         Command::Albedo(args) => commands::brdf::run_albedo(args),
+        Command::Lobe(args) => commands::lobe::run_lobe(args),
         Command::Synth(args) => commands::synth::run_synth(args),
         Command::Render(args) => commands::synth::run_render(args),
         Command::Fit(args) => commands::fit::run_fit(args),

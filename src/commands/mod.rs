@@ -4,6 +4,7 @@
 pub mod brdf;
 pub mod fit;
 pub mod images;
+pub mod lobe;
 pub mod output;
 pub mod synth;
 
