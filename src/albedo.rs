@@ -140,9 +140,10 @@ pub fn albedo_by_bounce(brdf: &dyn Brdf, wi: Vec3<f64>, samples: usize, seed: u6
                 if s.bounces == 0 {
                     resolved = false;
                     let v = brdf.eval(wi, s.wo, &mut rng);
-                    for c in 0..3 {
-                        acc[0][c] += v.single[c] * s.wo.z / s.pdf;
-                        acc[1][c] += v.multi[c] * s.wo.z / s.pdf;
+                    let scale = s.wo.z / s.pdf;
+                    for (c, (single, multi)) in v.single.iter().zip(&v.multi).enumerate() {
+                        acc[0][c] += single * scale;
+                        acc[1][c] += multi * scale;
                     }
                 } else {
                     let k = (s.bounces as usize).min(4) - 1;
