@@ -17,7 +17,10 @@ const N: usize = 256;
 fn estimators(c: &mut Criterion) {
     let mut rng = rng_stream(7, 0);
     let mut unit = || {
-        let (z, phi): (f64, f64) = (rng.random_range(0.05..1.0), rng.random_range(0.0..std::f64::consts::TAU));
+        let (z, phi): (f64, f64) = (
+            rng.random_range(0.05..1.0),
+            rng.random_range(0.0..std::f64::consts::TAU),
+        );
         let r = (1.0 - z * z).sqrt();
         Vec3::new(r * phi.cos(), r * phi.sin(), z)
     };
@@ -30,14 +33,23 @@ fn estimators(c: &mut Criterion) {
             ndf: NdfKind::Ggx,
             height: Height::Correlated,
             alpha: [0.5, 0.5],
-            fresnel: FresnelSpec::Conductor { eta: [0.2378, 1.0066, 1.2404], k: [3.6264, 2.5823, 2.3929] },
+            fresnel: FresnelSpec::Conductor {
+                eta: [0.2378, 1.0066, 1.2404],
+                k: [3.6264, 2.5823, 2.3929],
+            },
             diffuse: [0.0; 3],
         };
         let brdf = material.brdf();
         let mut rng = rng_stream(1, 0);
         // Build any lazily computed tables before timing.
         brdf.eval(dirs[0].0, dirs[0].1, &mut rng);
-        group.bench_function(model.name(), |b| b.iter(|| dirs.iter().map(|(wi, wo)| brdf.eval(black_box(*wi), black_box(*wo), &mut rng).total()[0]).sum::<f64>()));
+        group.bench_function(model.name(), |b| {
+            b.iter(|| {
+                dirs.iter()
+                    .map(|(wi, wo)| brdf.eval(black_box(*wi), black_box(*wo), &mut rng).total()[0])
+                    .sum::<f64>()
+            })
+        });
     }
     group.finish();
 }
