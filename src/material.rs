@@ -186,6 +186,14 @@ impl Material {
     pub fn brdf(&self) -> Box<dyn Brdf> {
         match self.model {
             Model::Single => Box::new(self.single::<f64>()),
+            Model::Bitterli => {
+                let s = self.single::<f64>();
+                Box::new(crate::bsdf::bitterli::Bitterli::new(s.microfacet, s.fresnel))
+            }
+            Model::Cui => {
+                let s = self.single::<f64>();
+                Box::new(crate::bsdf::cui::Cui::new(s.microfacet, s.fresnel))
+            }
         }
     }
 }

@@ -8,7 +8,12 @@
 //! | model | file | kind |
 //! | --- | --- | --- |
 //! | `single` | [`single`] | analytic, Walter et al. 2007 |
+//! | `bitterli` | [`bitterli`] | stochastic, position-free, unbiased; Bitterli & d'Eon 2022 |
+//! | `cui` | [`cui`] | stochastic, position-free, unbiased; Cui et al. 2023 |
 
+pub mod bitterli;
+pub mod cui;
+mod position_free;
 pub mod single;
 #[cfg(test)]
 pub(crate) mod testing;
@@ -75,14 +80,20 @@ pub trait Brdf: Send + Sync {
 pub enum Model {
     /// Walter et al. 2007: analytic, loses the energy of multiple bounces.
     Single,
+    /// Bitterli & d'Eon 2022: position-free, hyperexponential heights, unbiased.
+    Bitterli,
+    /// Cui et al. 2023: position-free, segment term by dynamic programming, unbiased.
+    Cui,
 }
 
 impl Model {
-    pub const ALL: [Model; 1] = [Model::Single];
+    pub const ALL: [Model; 3] = [Model::Single, Model::Bitterli, Model::Cui];
 
     pub fn name(self) -> &'static str {
         match self {
             Model::Single => "single",
+            Model::Bitterli => "bitterli",
+            Model::Cui => "cui",
         }
     }
 }

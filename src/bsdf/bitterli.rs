@@ -1,0 +1,604 @@
+//! `bitterli`: multiple scattering on the height-correlated Smith microsurface by the
+//! position-free path integral of Bitterli & d'Eon 2022 ("A Position-Free Path Integral for
+//! Homogeneous Slabs and Multiple Scattering on Smith Microfacets", CGF 41(4)).
+//!
+//! | parameter | unit / range | meaning |
+//! | --- | --- | --- |
+//! | `alpha` (`ax`, `ay`) | > 0, 1e-4 to 3 tested, anisotropy up to 100 | microfacet roughness |
+//! | `ndf` | `ggx`, `beckmann` | distribution of normals |
+//! | `fresnel` | white, Schlick, conductor, dielectric (reflection only) | reflectance of a microfacet |
+//!
+//! | property | value |
+//! | --- | --- |
+//! | kind | stochastic: `single` exact (Walter et al. 2007 with height-correlated G2), `multi` a one-path Monte Carlo estimate of paths of two or more bounces |
+//! | bias | none: the same quantity as Heitz et al. 2016's random walk on the semi-infinite microsurface (Dupuy et al. 2016), with every depth integrated in closed form |
+//! | reciprocal | yes: `eval` combines a walk from `wi` and a walk from `wo` symmetrically (balance heuristic), and the path contribution is symmetric |
+//! | height model | correlated only (the microsurface is the semi-infinite slab of sec. 6); the material's `height` field is ignored |
+//! | `sample` | exact: the walk exits with its exact conditional probability, weight = product of the Fresnel terms (times the weight of the fallback, whose mean is 1) |
+//! | `pdf` | approximate ([`super::position_free::mis_pdf`]) |
+//!
+//! Equations used (section and equation numbers of the paper):
+//! - optical depth: extinction of a direction `sigma(d) = |Lambda(d)|` with the full-sphere
+//!   Lambda (eq. 24-25; for the walk the depth `tau = -ln C1(h)` grows downward);
+//! - height distribution after `i` collisions, a sum of exponentials `h_i(z) = sum_j a_j exp(-b_j z)`
+//!   (eq. 12), started with `a = b = sigma(d0)` (eq. 9), updated downward by eq. 17
+//!   (`a_j *= sigma / (sigma - b_j)`, new term `-sum a_j` with rate `sigma`) and upward, for the
+//!   semi-infinite slab, by eq. 21 (`a_j *= sigma / (b_j + sigma)`);
+//! - exit probability along the upward `dk`: `P_exit = sum_j a_j / (b_j + sigma(dk))` (eq. 22);
+//! - the estimator of Alg. 3 with the phase function of Heitz et al. 2016 (next-event estimation
+//!   of `rho(d_i -> wo) P_exit` at every vertex), run forward from `wi` and backward from `wo`
+//!   and combined by MIS with the balance heuristic (sec. 6.1; the pdf ratio of the two
+//!   strategies reduces to projected areas, see [`Bitterli::walk`]);
+//! - Russian roulette from the energy left, the mass `sum_j a_j / b_j` of `h_i` (sec. 6.1.3).
+//!
+//! Numerical safety (sec. 5.1.1): the downward update divides by `sigma - b_j`, so nearly equal
+//! Lambda values, and long paths, lose digits to cancellation. Every coefficient carries a
+//! first-order bound on its absolute rounding error; whenever the bound on an exit probability
+//! or on the mass exceeds [`REL_TOL`] of its value, or the path passes
+//! [`MAX_CLOSED_FORM_BOUNCES`] bounces (as in the paper), the walk falls back to explicit
+//! depths: the depth of the current collision is drawn by replaying the directions taken so far
+//! with forced collisions (a truncated exponential on every upward segment, the survival
+//! probability multiplying a weight), and the walk goes on with explicit depths. That estimator
+//! is unbiased conditional on the directions, so the fallback costs variance, never bias.
+//! [`Bitterli::fallback_stats`] counts the walks that fell back.
+
+use super::position_free::{
+    connect, mis_pdf, scatter, signed_lambda, survival, MAX_WALK_BOUNCES,
+};
+use super::single::SingleBounce;
+use super::{Brdf, BrdfSample, BrdfValue, Rng};
+use crate::microfacet::{Fresnel, Height, Microfacet};
+use crate::scalar::Vec3;
+use rand::Rng as _;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Past this many bounces the closed form is abandoned for explicit depths (the paper's choice,
+/// sec. 5.1.1). Also the capacity of the coefficient arrays.
+pub const MAX_CLOSED_FORM_BOUNCES: usize = 10;
+
+/// Largest accepted bound on the relative rounding error of a closed-form exit probability or
+/// mass; beyond it the walk falls back to explicit depths.
+pub const REL_TOL: f64 = 1e-7;
+
+const CAP: usize = MAX_CLOSED_FORM_BOUNCES + 2;
+
+/// The closed-form height distribution of Alg. 1 for the semi-infinite slab, with a running
+/// bound on the rounding error of every amplitude.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct HeightDistribution {
+    n: usize,
+    a: [f64; CAP],
+    b: [f64; CAP],
+    /// First-order bound on the absolute rounding error of `a[j]`.
+    err: [f64; CAP],
+}
+
+impl HeightDistribution {
+    /// `h_1(z) = sigma0 exp(-sigma0 z)` for the entering direction of extinction `sigma0` (eq. 9).
+    pub(crate) fn new(sigma0: f64) -> Self {
+        let mut h = HeightDistribution {
+            n: 1,
+            a: [0.0; CAP],
+            b: [0.0; CAP],
+            err: [0.0; CAP],
+        };
+        h.a[0] = sigma0;
+        h.b[0] = sigma0;
+        h
+    }
+
+    /// Add a segment with Cui's signed Lambda `s` (negative downward): eq. 17 downward, eq. 21
+    /// upward. Returns `false` (leaving `self` unusable) when the arrays are full.
+    pub(crate) fn add(&mut self, s: f64) -> bool {
+        let eps = f64::EPSILON;
+        let n = self.n;
+        if s < 0.0 {
+            if n >= CAP {
+                return false;
+            }
+            let sigma = -s;
+            let (mut sum, mut sum_abs, mut sum_err) = (0.0, 0.0, 0.0);
+            for j in 0..n {
+                let f = sigma / (sigma - self.b[j]);
+                self.a[j] *= f;
+                // sigma and b[j] are exact inputs: the difference and the quotient round once
+                // each, the product once more.
+                self.err[j] = self.err[j] * f.abs() + 3.0 * eps * self.a[j].abs();
+                sum += self.a[j];
+                sum_abs += self.a[j].abs();
+                sum_err += self.err[j];
+            }
+            self.a[n] = -sum;
+            self.b[n] = sigma;
+            self.err[n] = sum_err + n as f64 * eps * sum_abs;
+            self.n = n + 1;
+        } else {
+            for j in 0..n {
+                let f = s / (s + self.b[j]);
+                self.a[j] *= f;
+                self.err[j] = self.err[j] * f + 3.0 * eps * self.a[j].abs();
+            }
+        }
+        true
+    }
+
+    /// `sum_j a_j / (b_j + sigma)` with a bound on its rounding error: the exit probability
+    /// along a direction of extinction `sigma` (eq. 22), or the mass for `sigma = 0`.
+    pub(crate) fn laplace(&self, sigma: f64) -> (f64, f64) {
+        let eps = f64::EPSILON;
+        let (mut sum, mut sum_abs, mut sum_err) = (0.0, 0.0, 0.0);
+        for j in 0..self.n {
+            let t = self.a[j] / (self.b[j] + sigma);
+            sum += t;
+            sum_abs += t.abs();
+            sum_err += self.err[j] / (self.b[j] + sigma);
+        }
+        (sum, sum_err + (self.n as f64 + 2.0) * eps * sum_abs)
+    }
+}
+
+/// `P_exit(d0, ..., dk)` of eq. 22 from Cui's signed Lambdas of the directions (`d0` down,
+/// `dk` up), with the bound on its rounding error. Zero when `d0` is upward or `dk` downward.
+#[cfg_attr(not(test), allow(dead_code))]
+pub(crate) fn p_exit(lambdas: &[f64]) -> (f64, f64) {
+    let k = lambdas.len() - 1;
+    if lambdas[0] >= 0.0 || lambdas[k] < 0.0 {
+        return (0.0, 0.0);
+    }
+    let mut h = HeightDistribution::new(-lambdas[0]);
+    for &s in &lambdas[1..k] {
+        assert!(h.add(s), "more than {CAP} exponentials");
+    }
+    h.laplace(lambdas[k])
+}
+
+/// One segment of signed Lambda `s` from a collision at explicit depth `x`, forced to end in a
+/// collision: downward the depth grows by an exponential step; upward the step is drawn from
+/// the exponential truncated to `[0, x)` and the weight is multiplied by the probability
+/// `1 - exp(-sigma x)` that the photon collides before leaving. `u` is uniform in `[0, 1)`.
+#[inline]
+fn forced_step(x: f64, weight: f64, s: f64, u: f64) -> (f64, f64) {
+    if s < 0.0 {
+        (x - (-u).ln_1p() / -s, weight)
+    } else {
+        let p = -(-s * x).exp_m1();
+        if !(p > 0.0) {
+            return (x, 0.0);
+        }
+        let t = -(-u * p).ln_1p() / s;
+        ((x - t).max(0.0), weight * p)
+    }
+}
+
+/// Replay the directions (signed Lambdas) of a path with [`forced_step`]: an explicit depth of
+/// its last collision and a weight with `E[weight g(depth)] = integral h(z) g(z) dz` for the
+/// closed-form height distribution `h` of the same directions.
+fn explicit_depth(prefix: &[f64], rng: &mut Rng) -> (f64, f64) {
+    let (mut x, mut w) = (0.0, 1.0);
+    for &s in prefix {
+        (x, w) = forced_step(x, w, s, rng.random());
+    }
+    (x, w)
+}
+
+/// Signed Lambdas of the directions of a walk, kept while the closed form is in use.
+#[derive(Clone, Copy)]
+struct Prefix {
+    n: usize,
+    s: [f64; CAP],
+}
+
+impl Prefix {
+    fn new(s0: f64) -> Self {
+        let mut p = Prefix {
+            n: 1,
+            s: [0.0; CAP],
+        };
+        p.s[0] = s0;
+        p
+    }
+    fn push(&mut self, s: f64) {
+        self.s[self.n] = s;
+        self.n += 1;
+    }
+    fn as_slice(&self) -> &[f64] {
+        &self.s[..self.n]
+    }
+}
+
+/// Where the current collision is: a closed-form distribution of depths, or an explicit depth
+/// with the weight of the forced collisions that produced it.
+#[derive(Clone, Copy)]
+enum Depth {
+    Closed(HeightDistribution),
+    Explicit { x: f64, weight: f64 },
+}
+
+/// The `bitterli` model (see the module documentation).
+#[derive(Debug)]
+pub struct Bitterli {
+    /// Exact single-bounce part, height-correlated.
+    pub single: SingleBounce<f64>,
+    /// The same surface with white Fresnel (for the MIS density).
+    white: SingleBounce<f64>,
+    max_closed_form: usize,
+    fallbacks: AtomicU64,
+    paths: AtomicU64,
+}
+
+impl Bitterli {
+    pub fn new(microfacet: Microfacet<f64>, fresnel: Fresnel<f64>) -> Self {
+        Bitterli {
+            single: SingleBounce {
+                microfacet,
+                fresnel,
+                height: Height::Correlated,
+            },
+            white: SingleBounce {
+                microfacet,
+                fresnel: Fresnel::White,
+                height: Height::Correlated,
+            },
+            max_closed_form: MAX_CLOSED_FORM_BOUNCES,
+            fallbacks: AtomicU64::new(0),
+            paths: AtomicU64::new(0),
+        }
+    }
+
+    /// The same model with the closed form limited to the first `bounces` collisions (at most
+    /// [`MAX_CLOSED_FORM_BOUNCES`]); `1` sends every path of two or more bounces through the
+    /// explicit-depth fallback (a test of the fallback).
+    pub fn with_max_closed_form(mut self, bounces: usize) -> Self {
+        self.max_closed_form = bounces.clamp(1, MAX_CLOSED_FORM_BOUNCES);
+        self
+    }
+
+    /// `(walks that fell back to explicit depths, walks)` since construction, over `eval`
+    /// (two walks per call) and `sample` (one walk per call).
+    pub fn fallback_stats(&self) -> (u64, u64) {
+        (
+            self.fallbacks.load(Ordering::Relaxed),
+            self.paths.load(Ordering::Relaxed),
+        )
+    }
+
+    fn count(&self, walks: u64, fell_back: u64) {
+        self.paths.fetch_add(walks, Ordering::Relaxed);
+        if fell_back > 0 {
+            self.fallbacks.fetch_add(fell_back, Ordering::Relaxed);
+        }
+    }
+
+    /// One walk of Alg. 3 from `wa` with next-event estimation toward `wb` at every vertex
+    /// after the first: an estimate of `f_multi(wa, wb) wb.z`, each path weighted by the
+    /// balance heuristic against the walk from `wb`. Returns the estimate and whether the walk
+    /// fell back to explicit depths.
+    ///
+    /// With `q(d -> d') = D(h) / (4 A(-d))` the density of a scattering step, a path
+    /// `d0 = -wa, d1, ..., d_{k-1}, wb` has forward density `prod_{t<k-1} q(d_t -> d_{t+1})` and
+    /// backward density `q(-wb -> -d_{k-1}) prod_{t>=1} q(-d_{t+1} -> -d_t)`; a step and its
+    /// reverse share the half vector, so their ratio is `A(-d_t) / A(d_{t+1})` and
+    /// `p_back / p_fwd = (D(h_{k-1}) / A(wb)) (A(wa) / D(h_0)) prod_{t=1}^{k-2} A(-d_t) / A(d_{t+1})`.
+    fn walk(&self, wa: Vec3<f64>, wb: Vec3<f64>, rng: &mut Rng) -> ([f64; 3], bool) {
+        let mf = &self.single.microfacet;
+        let fresnel = &self.single.fresnel;
+        let mut sum = [0.0; 3];
+        let d0 = -wa;
+        let s0 = signed_lambda(mf, d0);
+        let sb = signed_lambda(mf, wb);
+        if !s0.is_finite() || !sb.is_finite() {
+            return (sum, false);
+        }
+        let area_a = mf.projected_area(wa);
+        let area_b = mf.projected_area(wb);
+        let mut depth = Depth::Closed(HeightDistribution::new(-s0));
+        let mut prefix = Prefix::new(s0);
+        let mut fell_back = false;
+        let (mut d, mut beta) = (d0, [1.0; 3]);
+        let (mut d_first, mut ratio) = (0.0, 1.0);
+        for bounce in 1..MAX_WALK_BOUNCES as usize {
+            // Random decisions of this step.
+            let u = [rng.random::<f64>(), rng.random::<f64>()];
+            let u_depth: f64 = rng.random();
+            let Some(step) = scatter(mf, fresnel, d, u) else {
+                break;
+            };
+            let s = signed_lambda(mf, step.d);
+            if !s.is_finite() {
+                break;
+            }
+            if bounce == 1 {
+                d_first = mf.d(step.m);
+            } else {
+                ratio *= mf.projected_area(-d) / mf.projected_area(step.d);
+            }
+            (0..3).for_each(|c| beta[c] *= step.fresnel[c]);
+            d = step.d;
+            // The collision at the end of `d` (vertex `bounce`).
+            depth = match depth {
+                Depth::Closed(mut h) => {
+                    if bounce < self.max_closed_form && h.add(s) {
+                        prefix.push(s);
+                        Depth::Closed(h)
+                    } else {
+                        fell_back = true;
+                        let (x, w) = explicit_depth(prefix.as_slice(), rng);
+                        let (x, weight) = forced_step(x, w, s, u_depth);
+                        Depth::Explicit { x, weight }
+                    }
+                }
+                Depth::Explicit { x, weight } => {
+                    let (x, weight) = forced_step(x, weight, s, u_depth);
+                    Depth::Explicit { x, weight }
+                }
+            };
+            // The closed form must be accurate for the mass and for the exit toward `wb`;
+            // otherwise replay the directions with explicit depths.
+            let (p_exit, mass) = match depth {
+                Depth::Closed(h) => {
+                    let (mass, mass_err) = h.laplace(0.0);
+                    let (p, p_err) = h.laplace(sb);
+                    if mass_err <= REL_TOL * mass && p_err <= REL_TOL * p {
+                        (p, mass)
+                    } else {
+                        fell_back = true;
+                        let (x, weight) = explicit_depth(prefix.as_slice(), rng);
+                        depth = Depth::Explicit { x, weight };
+                        (weight * (-sb * x).exp(), weight)
+                    }
+                }
+                Depth::Explicit { x, weight } => (weight * (-sb * x).exp(), weight),
+            };
+            // Next-event estimation of the path of `bounce + 1` reflections.
+            if let Some((h, c)) = connect(d, wb) {
+                let dh = mf.d(h);
+                let rho = dh / (4.0 * mf.projected_area(-d));
+                let r = (dh / area_b) * (area_a / d_first) * ratio;
+                let mis = if r.is_finite() { 1.0 / (1.0 + r) } else { 0.0 };
+                let f = fresnel.eval(c).0;
+                let common = rho * p_exit * mis;
+                if common > 0.0 && common.is_finite() {
+                    (0..3).for_each(|ch| sum[ch] += beta[ch] * f[ch] * common);
+                }
+            }
+            // Russian roulette.
+            let q = survival(&beta, mass);
+            if !(q > 0.0) {
+                break;
+            }
+            if q < 1.0 {
+                if rng.random::<f64>() >= q {
+                    break;
+                }
+                (0..3).for_each(|ch| beta[ch] /= q);
+            }
+        }
+        (sum, fell_back)
+    }
+
+    /// The exact sampler: the walk of Alg. 3 that leaves along an upward direction with its
+    /// exact conditional probability `P_exit(d0..dk) / (mass left)`. Returns the exit direction,
+    /// the weight (product of Fresnel terms, times the fallback's weight) and the bounces.
+    fn sample_walk(
+        &self,
+        wi: Vec3<f64>,
+        u_first: [f64; 2],
+        rng: &mut Rng,
+    ) -> (Option<(Vec3<f64>, [f64; 3], u32)>, bool) {
+        let mf = &self.single.microfacet;
+        let fresnel = &self.single.fresnel;
+        let d0 = -wi;
+        let s0 = signed_lambda(mf, d0);
+        if !s0.is_finite() {
+            return (None, false);
+        }
+        let mut h = HeightDistribution::new(-s0);
+        let mut prefix = Prefix::new(s0);
+        let mut explicit: Option<f64> = None;
+        let mut fell_back = false;
+        // Probability of the "stay" decisions taken so far (the mass left, as used).
+        let mut stay = 1.0;
+        let (mut d, mut beta) = (d0, [1.0; 3]);
+        for bounce in 1..=MAX_WALK_BOUNCES {
+            let u = if bounce == 1 {
+                u_first
+            } else {
+                [rng.random(), rng.random()]
+            };
+            let (u_exit, u_depth): (f64, f64) = (rng.random(), rng.random());
+            let Some(step) = scatter(mf, fresnel, d, u) else {
+                return (None, fell_back);
+            };
+            let s = signed_lambda(mf, step.d);
+            if !s.is_finite() {
+                return (None, fell_back);
+            }
+            (0..3).for_each(|c| beta[c] *= step.fresnel[c]);
+            // Leaving the collision at the end of `d` (vertex `bounce - 1`) along `step.d`.
+            if explicit.is_none() {
+                // The closed form is valid for the current collision (vertex `bounce - 1`).
+                let closed_exit = if s >= 0.0 {
+                    let (p, err) = h.laplace(s);
+                    (err <= REL_TOL * p).then_some(p)
+                } else {
+                    Some(0.0)
+                };
+                match closed_exit {
+                    Some(p) => {
+                        if s >= 0.0 {
+                            let leave = (p / stay).min(1.0);
+                            if u_exit < leave {
+                                let w = p / (stay * leave);
+                                return (
+                                    Some((step.d, beta.map(|b| b * w), bounce)),
+                                    fell_back,
+                                );
+                            }
+                            stay *= 1.0 - leave;
+                        }
+                        if (bounce as usize) < self.max_closed_form && h.add(s) {
+                            prefix.push(s);
+                        } else {
+                            // The next collision is past the closed form: replay up to here.
+                            fell_back = true;
+                            let (x, w) = explicit_depth(prefix.as_slice(), rng);
+                            let (x, w) = forced_step(x, w, s, u_depth);
+                            beta = beta.map(|b| b * w / stay);
+                            explicit = Some(x);
+                        }
+                        d = step.d;
+                        continue;
+                    }
+                    None => {
+                        fell_back = true;
+                        let (x, w) = explicit_depth(prefix.as_slice(), rng);
+                        beta = beta.map(|b| b * w / stay);
+                        explicit = Some(x);
+                    }
+                }
+            }
+            // Explicit depths: the analog walk (exact, no weight change).
+            let x = explicit.expect("explicit depth");
+            if s >= 0.0 {
+                let leave = (-s * x).exp();
+                if u_exit < leave {
+                    return (Some((step.d, beta, bounce)), fell_back);
+                }
+                // The step conditioned on colliding before the top.
+                let p = 1.0 - leave;
+                let t = -(-u_depth * p).ln_1p() / s;
+                explicit = Some((x - t).max(0.0));
+            } else {
+                explicit = Some(x - (-u_depth).ln_1p() / -s);
+            }
+            d = step.d;
+        }
+        (None, fell_back)
+    }
+}
+
+impl Brdf for Bitterli {
+    fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return BrdfValue::default();
+        }
+        let single = self.single.eval(wi, wo).0;
+        let (forward, fb_f) = self.walk(wi, wo, rng);
+        let (backward, fb_b) = self.walk(wo, wi, rng);
+        self.count(2, fb_f as u64 + fb_b as u64);
+        let multi = [0, 1, 2].map(|c| {
+            let v = forward[c] / wo.z + backward[c] / wi.z;
+            if v.is_finite() {
+                v
+            } else {
+                0.0
+            }
+        });
+        BrdfValue { single, multi }
+    }
+
+    fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {
+        if wi.z <= 0.0 {
+            return None;
+        }
+        let (path, fell_back) = self.sample_walk(wi, u, rng);
+        self.count(1, fell_back as u64);
+        let (wo, weight, bounces) = path?;
+        if wo.z <= 0.0 || !weight.iter().all(|w| w.is_finite()) {
+            return None;
+        }
+        Some(BrdfSample {
+            wo,
+            weight,
+            pdf: mis_pdf(&self.white, wi, wo),
+            bounces,
+        })
+    }
+
+    fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
+        mis_pdf(&self.white, wi, wo)
+    }
+
+    fn is_stochastic(&self) -> bool {
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::albedo::rng_stream;
+    use crate::bsdf::cui::{segment_term, Cui};
+    use crate::bsdf::testing::*;
+    use crate::microfacet::NdfKind;
+
+    fn white(ndf: NdfKind, a: f64) -> (Bitterli, Cui, SingleBounce<f64>) {
+        let mf = Microfacet::new(ndf, a, a);
+        (
+            Bitterli::new(mf, Fresnel::White),
+            Cui::new(mf, Fresnel::White),
+            SingleBounce {
+                microfacet: mf,
+                fresnel: Fresnel::White,
+                height: Height::Correlated,
+            },
+        )
+    }
+
+    struct MultiOnly<'a>(&'a dyn Brdf);
+    impl Brdf for MultiOnly<'_> {
+        fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
+            BrdfValue { single: [0.0; 3], multi: self.0.eval(wi, wo, rng).multi }
+        }
+        fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {
+            let s = self.0.sample(wi, u, rng)?;
+            (s.bounces > 1).then_some(s)
+        }
+        fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
+            self.0.pdf(wi, wo)
+        }
+        fn is_stochastic(&self) -> bool {
+            true
+        }
+    }
+
+    #[test]
+    fn probe_multi() {
+        for (ndf, a, t) in [(NdfKind::Beckmann, 0.1, 80.0), (NdfKind::Ggx, 0.1, 80.0), (NdfKind::Beckmann, 0.6, 80.0)] {
+            let (b, c, g) = white(ndf, a);
+            let wi = unit(t, 10.0);
+            for n in [20_000, 200_000] {
+                let bs = albedo_by_sampling(&MultiOnly(&b), wi, n, 1);
+                let be = albedo_by_eval(&MultiOnly(&b), &g, wi, n, 2);
+                let cs = albedo_by_sampling(&MultiOnly(&c), wi, n, 1);
+                let ce = albedo_by_eval(&MultiOnly(&c), &g, wi, n, 3);
+                eprintln!(
+                    "{ndf:?} a {a} t {t} n {n}: bit s {:.5}+-{:.5} e {:.5}+-{:.5} | cui s {:.5}+-{:.5} e {:.5}+-{:.5}",
+                    bs.value[0], bs.stderr[0], be.value[0], be.stderr[0], cs.value[0], cs.stderr[0], ce.value[0], ce.stderr[0]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn probe_furnace() {
+        for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
+            for a in [0.1, 0.6, 1.5] {
+                for t in [0.0, 60.0, 80.0] {
+                    let (b, c, g) = white(ndf, a);
+                    let wi = unit(t, 10.0);
+                    let t0 = std::time::Instant::now();
+                    let bs = albedo_by_sampling(&b, wi, 20_000, 1);
+                    let be = albedo_by_eval(&b, &g, wi, 20_000, 2);
+                    let t1 = t0.elapsed();
+                    let cs = albedo_by_sampling(&c, wi, 20_000, 1);
+                    let ce = albedo_by_eval(&c, &g, wi, 20_000, 2);
+                    eprintln!(
+                        "{ndf:?} a {a} t {t}: bit s {:.5}+-{:.5} e {:.5}+-{:.5} | cui s {:.5}+-{:.5} e {:.5}+-{:.5} | {:?} {:?} {t1:?}",
+                        bs.value[0], bs.stderr[0], be.value[0], be.stderr[0], cs.value[0], cs.stderr[0], ce.value[0], ce.stderr[0], b.fallback_stats(), t0.elapsed()
+                    );
+                }
+            }
+        }
+    }
+}
