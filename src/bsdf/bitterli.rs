@@ -525,34 +525,32 @@ impl Brdf for Bitterli {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
+    #![allow(clippy::needless_range_loop)] // channel loops over parallel arrays
+
     use super::*;
-    use crate::albedo::rng_stream;
+    use crate::albedo::{rng_stream, Estimate};
     use crate::bsdf::cui::{segment_term, Cui};
+    use crate::bsdf::position_free::checks::{assert_furnace, furnace};
     use crate::bsdf::testing::*;
     use crate::microfacet::NdfKind;
+    use std::sync::{Arc, Mutex};
 
-    fn white(ndf: NdfKind, a: f64) -> (Bitterli, Cui, SingleBounce<f64>) {
-        let mf = Microfacet::new(ndf, a, a);
-        (
-            Bitterli::new(mf, Fresnel::White),
-            Cui::new(mf, Fresnel::White),
-            SingleBounce {
-                microfacet: mf,
-                fresnel: Fresnel::White,
-                height: Height::Correlated,
-            },
-        )
+    fn copper() -> Fresnel<f64> {
+        Fresnel::Conductor {
+            eta: crate::scalar::Rgb([0.2378, 1.0066, 1.2404]),
+            k: crate::scalar::Rgb([3.6264, 2.5823, 2.3929]),
+        }
     }
 
-    struct MultiOnly<'a>(&'a dyn Brdf);
-    impl Brdf for MultiOnly<'_> {
+    /// A shared model behind the `Brdf` interface, so a test keeps its counters.
+    struct Shared(Arc<Bitterli>);
+    impl Brdf for Shared {
         fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
-            BrdfValue { single: [0.0; 3], multi: self.0.eval(wi, wo, rng).multi }
+            self.0.eval(wi, wo, rng)
         }
         fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {
-            let s = self.0.sample(wi, u, rng)?;
-            (s.bounces > 1).then_some(s)
+            self.0.sample(wi, u, rng)
         }
         fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
             self.0.pdf(wi, wo)
@@ -563,42 +561,508 @@ mod tests {
     }
 
     #[test]
-    fn probe_multi() {
-        for (ndf, a, t) in [(NdfKind::Beckmann, 0.1, 80.0), (NdfKind::Ggx, 0.1, 80.0), (NdfKind::Beckmann, 0.6, 80.0)] {
-            let (b, c, g) = white(ndf, a);
-            let wi = unit(t, 10.0);
-            for n in [20_000, 200_000] {
-                let bs = albedo_by_sampling(&MultiOnly(&b), wi, n, 1);
-                let be = albedo_by_eval(&MultiOnly(&b), &g, wi, n, 2);
-                let cs = albedo_by_sampling(&MultiOnly(&c), wi, n, 1);
-                let ce = albedo_by_eval(&MultiOnly(&c), &g, wi, n, 3);
-                eprintln!(
-                    "{ndf:?} a {a} t {t} n {n}: bit s {:.5}+-{:.5} e {:.5}+-{:.5} | cui s {:.5}+-{:.5} e {:.5}+-{:.5}",
-                    bs.value[0], bs.stderr[0], be.value[0], be.stderr[0], cs.value[0], cs.stderr[0], ce.value[0], ce.stderr[0]
-                );
+    fn white_furnace() {
+        let models = Mutex::new(Vec::new());
+        let rows = furnace(
+            &|mf| {
+                let m = Arc::new(Bitterli::new(mf, Fresnel::White));
+                models.lock().unwrap().push(m.clone());
+                Box::new(Shared(m))
+            },
+            20_000,
+            100_000,
+            7,
+        );
+        assert_furnace("bitterli", &rows);
+        let (mut fell, mut walks) = (0, 0);
+        for (k, m) in models.lock().unwrap().iter().enumerate() {
+            let (f, w) = m.fallback_stats();
+            eprintln!(
+                "fallback rate {:?} alpha {}: {f} / {w} = {:.2e}",
+                m.single.microfacet.ndf,
+                [0.1, 0.3, 0.6, 1.0, 1.5][k % 5],
+                f as f64 / w as f64
+            );
+            (fell, walks) = (fell + f, walks + w);
+        }
+        eprintln!(
+            "bitterli fallback over the furnace sweep: {fell} / {walks} walks = {:.2e}",
+            fell as f64 / walks as f64
+        );
+        assert!(walks > 4_000_000);
+    }
+
+    /// Random signed Lambdas of a direction sequence `d0` (down), ..., `dk` (up) on a surface.
+    fn random_sequence(mf: &Microfacet<f64>, k: usize, rng: &mut Rng) -> Vec<f64> {
+        (0..=k)
+            .map(|i| {
+                let w = random_upper(rng);
+                let down = i == 0 || (i < k && rng.random::<bool>());
+                signed_lambda(mf, if down { -w } else { w })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn exit_probability_is_lambda_product_times_segment_term() {
+        // Cui et al. 2023 supp. eq. 7: p_exit = (prod_{i<k} |Lambda(d_i)|) S_k.
+        let mut rng = rng_stream(21, 0);
+        let (mut checked, mut flagged, mut worst) = (0, 0, 0.0f64);
+        for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
+            for k in 2..=6 {
+                for trial in 0..400 {
+                    let a = [0.1, 0.5, 1.0, 2.0][trial % 4];
+                    let mf = Microfacet::new(ndf, a, a * [1.0, 0.3][trial % 2]);
+                    let l = random_sequence(&mf, k, &mut rng);
+                    let (p, err) = p_exit(&l);
+                    let cui = l[..k].iter().map(|x| x.abs()).product::<f64>() * segment_term(&l);
+                    let rel = (p - cui).abs() / cui;
+                    // The running error bound is a bound.
+                    assert!(
+                        (p - cui).abs() <= err + 1e-14 * cui,
+                        "{l:?}: {p} vs {cui}, bound {err}"
+                    );
+                    if err <= 1e-10 * p {
+                        assert!(rel < 1e-9, "{l:?}: {p} vs {cui}");
+                        worst = worst.max(rel);
+                        checked += 1;
+                    } else {
+                        flagged += 1;
+                    }
+                }
+            }
+        }
+        eprintln!(
+            "p_exit vs prod|Lambda| S_k: {checked} sequences within 1e-9 (worst {worst:.1e}), \
+             {flagged} flagged by the error bound"
+        );
+        assert!(flagged * 100 < checked);
+    }
+
+    #[test]
+    fn closed_forms_for_two_and_three_bounces() {
+        // Cui supp. sec. 1.2 (2 bounces, d1 down) and our derivations for the other cases.
+        let (s0, s1, s2, s3) = (1.3, 2.9, 0.45, 0.8);
+        let check = |l: &[f64], expected: f64| {
+            let (p, _) = p_exit(l);
+            let k = l.len() - 1;
+            let s = segment_term(l) * l[..k].iter().map(|x| x.abs()).product::<f64>();
+            assert!((p - expected).abs() < 1e-13 * expected, "{l:?}: {p} vs {expected}");
+            assert!((s - expected).abs() < 1e-13 * expected, "{l:?}: {s} vs {expected}");
+        };
+        // down, down, up: |L0| |L1| / ((L2 + |L0|)(L2 + |L1|)).
+        check(&[-s0, -s1, s2], s0 * s1 / ((s2 + s0) * (s2 + s1)));
+        // down, up, up: |L0| L1 / ((L2 + |L0|)(L1 + |L0|)).
+        check(&[-s0, s1, s2], s0 * s1 / ((s2 + s0) * (s1 + s0)));
+        // down, down, up, up: Bitterli's two-term form (first line of Cui's derivation).
+        let first_line = s0 * s1 / (s1 - s0) * s2 / (s2 + s0) / (s3 + s0)
+            - s0 * s1 / (s1 - s0) * s2 / (s2 + s1) / (s3 + s1);
+        let ours = s0 * s1 * s2 / ((s1 + s3) * (s0 + s2)) * (1.0 / (s0 + s3) + 1.0 / (s1 + s2));
+        assert!((first_line - ours).abs() < 1e-14);
+        check(&[-s0, -s1, s2, s3], ours);
+        // down, up, down, up (where the printed eq. 2 gives 0).
+        check(
+            &[-s0, s1, -s2 - 1.0, s3],
+            s0 * s1 * (s2 + 1.0) / ((s0 + s1) * (s0 + s3) * (s2 + 1.0 + s3)),
+        );
+        // The printed final line of the 3-bounce derivation disagrees:
+        let printed = s0 * s1 * s2 / ((s0 + s2) * (s0 + s3)) * (1.0 / (s0 + s2) + 1.0 / (s1 + s3));
+        assert!((printed - ours).abs() > 1e-3 * ours);
+    }
+
+    /// `P_exit` by explicit depths: the fallback's estimator, `W exp(-sigma_k x)`.
+    fn p_exit_by_explicit_depths(l: &[f64], n: usize, seed: u64) -> Estimate {
+        let mut rng = rng_stream(seed, 0);
+        let k = l.len() - 1;
+        let (mut sum, mut sum2) = (0.0, 0.0);
+        for _ in 0..n {
+            let (x, w) = explicit_depth(&l[..k], &mut rng);
+            let v = w * (-l[k] * x).exp();
+            sum += v;
+            sum2 += v * v;
+        }
+        let mean = sum / n as f64;
+        let se = ((sum2 / n as f64 - mean * mean).max(0.0) / (n as f64 - 1.0)).sqrt();
+        Estimate {
+            value: [mean; 3],
+            stderr: [se; 3],
+            samples: n,
+        }
+    }
+
+    #[test]
+    fn coincident_lambdas_are_flagged_and_the_fallback_is_unbiased() {
+        let exact = |l: &[f64]| {
+            let k = l.len() - 1;
+            let p = l[..k].iter().map(|x| x.abs()).product::<f64>() * segment_term(l);
+            Estimate {
+                value: [p; 3],
+                stderr: [0.0; 3],
+                samples: 1,
+            }
+        };
+        // Two downward directions with the same Lambda: the update divides by zero.
+        let coincident = [-1.7, 0.4, -1.7, 0.6];
+        let (p, err) = p_exit(&coincident);
+        assert!(!(err <= REL_TOL * p), "not flagged: {p} +- {err}");
+        // Nudged apart by 1e-9 the closed form survives but loses ~7 digits, and says so.
+        let nudged = [-1.7, 0.4, -1.7 * (1.0 + 1e-9), 0.6];
+        let (pn, errn) = p_exit(&nudged);
+        let e = exact(&nudged).value[0];
+        assert!((pn - e).abs() <= errn && errn > 1e-9 * e && errn < 1e-4 * e);
+        // A long path with nearly equal Lambdas.
+        let long = [-1.2, 0.3, -1.2001, 0.5, -1.2002, -1.3, 0.2, -1.2003, 0.9, 0.7];
+        for l in [&coincident[..], &nudged[..], &long[..]] {
+            let est = p_exit_by_explicit_depths(l, 400_000, 5);
+            let z = z_score(&est, &exact(l), 0);
+            eprintln!("explicit depths {l:?}: {:?} vs {}: z = {z:.2}", est.value[0], exact(l).value[0]);
+            assert!(z < 4.0 && est.stderr[0] < 0.01 * est.value[0]);
+        }
+    }
+
+    fn copper_configuration(
+        k: usize,
+        alpha: f64,
+    ) -> (NdfKind, Microfacet<f64>) {
+        let ndf = if k % 2 == 0 { NdfKind::Ggx } else { NdfKind::Beckmann };
+        let ay = alpha * [1.0, 1.0, 0.5, 1.7][k % 4];
+        (ndf, Microfacet::new(ndf, alpha, ay))
+    }
+
+    #[test]
+    fn agrees_with_cui_on_copper() {
+        let (mut max_z, mut sum_z2, mut count) = (0.0f64, 0.0, 0);
+        for (k, (alpha, wi, wo)) in random_configurations(120, 31).into_iter().enumerate() {
+            let (_, mf) = copper_configuration(k, alpha);
+            let b = Bitterli::new(mf, copper());
+            let c = Cui::new(mf, copper());
+            let eb = mean_eval(&b, wi, wo, 3000, 100 + k as u64);
+            let ec = mean_eval(&c, wi, wo, 6000, 500 + k as u64);
+            for ch in 0..3 {
+                let z = z_score(&eb, &ec, ch);
+                assert!(z < 4.0, "config {k} {mf:?} {wi:?} {wo:?}: {eb:?} vs {ec:?}");
+                max_z = max_z.max(z);
+                sum_z2 += z * z;
+                count += 1;
+            }
+        }
+        eprintln!(
+            "bitterli vs cui on copper: {count} channel comparisons, max |z| = {max_z:.2}, \
+             mean z^2 = {:.3}",
+            sum_z2 / count as f64
+        );
+    }
+
+    #[test]
+    fn is_reciprocal_and_cui_reciprocity_is_measured() {
+        let (mut max_b, mut max_c, mut z2_c, mut n) = (0.0f64, 0.0f64, 0.0, 0);
+        for (k, (alpha, wi, wo)) in random_configurations(50, 41).into_iter().enumerate() {
+            let (_, mf) = copper_configuration(k, alpha);
+            let b = Bitterli::new(mf, copper());
+            let (f, g) = (
+                mean_eval(&b, wi, wo, 3000, 2 * k as u64),
+                mean_eval(&b, wo, wi, 3000, 2 * k as u64 + 1),
+            );
+            let c = Cui::new(mf, copper());
+            let (fc, gc) = (
+                mean_eval(&c, wi, wo, 4000, 300 + 2 * k as u64),
+                mean_eval(&c, wo, wi, 4000, 301 + 2 * k as u64),
+            );
+            for ch in 0..3 {
+                let z = z_score(&f, &g, ch);
+                assert!(z < 4.0, "config {k}: {f:?} vs {g:?}");
+                max_b = max_b.max(z);
+                let zc = z_score(&fc, &gc, ch);
+                max_c = max_c.max(zc);
+                z2_c += zc * zc;
+                n += 1;
+            }
+        }
+        eprintln!(
+            "reciprocity over 50 configurations: bitterli max |z| = {max_b:.2}; cui (measured) \
+             max |z| = {max_c:.2}, mean z^2 = {:.3}",
+            z2_c / n as f64
+        );
+    }
+
+    #[test]
+    fn sampler_matches_eval_both_models() {
+        // The harness compares bins by z-scores: a bin whose expected sampled energy is a
+        // fraction of a sample (Beckmann's grazing bins opposite the lobe hold ~1e-6 of the
+        // energy at alpha 0.5) scores 0 against a tiny eval variance, so Beckmann needs enough
+        // samples to put a few in every bin. 400 evaluations per bin tame the heavy tail of
+        // cui's unidirectional estimator.
+        for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
+            for alpha in [0.5, 1.0] {
+                let mf = Microfacet::new(ndf, alpha, alpha);
+                let samples = match (ndf, alpha < 0.75) {
+                    (NdfKind::Ggx, _) => 300_000,
+                    (NdfKind::Beckmann, true) => 3_000_000,
+                    (NdfKind::Beckmann, false) => 600_000,
+                };
+                for theta in [35.0, 70.0] {
+                    let wi = unit(theta, 10.0);
+                    let t = std::time::Instant::now();
+                    let zb = sampler_matches_eval(&Bitterli::new(mf, copper()), wi, samples, 400, 8);
+                    let zc = sampler_matches_eval(&Cui::new(mf, copper()), wi, samples, 400, 9);
+                    eprintln!(
+                        "sampler vs eval {ndf:?} alpha {alpha} theta {theta}: bitterli z = {zb:.2}, \
+                         cui z = {zc:.2} ({:?})",
+                        t.elapsed()
+                    );
+                    assert!(zb < 4.0 && zc < 4.0);
+                }
             }
         }
     }
 
     #[test]
-    fn probe_furnace() {
-        for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
-            for a in [0.1, 0.6, 1.5] {
-                for t in [0.0, 60.0, 80.0] {
-                    let (b, c, g) = white(ndf, a);
-                    let wi = unit(t, 10.0);
-                    let t0 = std::time::Instant::now();
-                    let bs = albedo_by_sampling(&b, wi, 20_000, 1);
-                    let be = albedo_by_eval(&b, &g, wi, 20_000, 2);
-                    let t1 = t0.elapsed();
-                    let cs = albedo_by_sampling(&c, wi, 20_000, 1);
-                    let ce = albedo_by_eval(&c, &g, wi, 20_000, 2);
-                    eprintln!(
-                        "{ndf:?} a {a} t {t}: bit s {:.5}+-{:.5} e {:.5}+-{:.5} | cui s {:.5}+-{:.5} e {:.5}+-{:.5} | {:?} {:?} {t1:?}",
-                        bs.value[0], bs.stderr[0], be.value[0], be.stderr[0], cs.value[0], cs.stderr[0], ce.value[0], ce.stderr[0], b.fallback_stats(), t0.elapsed()
-                    );
+    fn fallback_is_counted_and_unbiased() {
+        // Every path of two or more bounces through explicit depths, against the closed form
+        // and against cui, by evaluation and by sampling.
+        let (mut max_z, mut n) = (0.0f64, 0);
+        for (k, (alpha, wi, wo)) in random_configurations(12, 51).into_iter().enumerate() {
+            let (_, mf) = copper_configuration(k, alpha);
+            let forced = Bitterli::new(mf, copper()).with_max_closed_form(1);
+            let closed = Bitterli::new(mf, copper());
+            let cui = Cui::new(mf, copper());
+            let ef = mean_eval(&forced, wi, wo, 4000, 60 + k as u64);
+            let ec = mean_eval(&closed, wi, wo, 4000, 80 + k as u64);
+            let eu = mean_eval(&cui, wi, wo, 6000, 90 + k as u64);
+            let sf = albedo_by_sampling(&forced, wi, 40_000, 70 + k as u64);
+            let sc = albedo_by_sampling(&closed, wi, 40_000, 75 + k as u64);
+            for ch in 0..3 {
+                for z in [
+                    z_score(&ef, &ec, ch),
+                    z_score(&ef, &eu, ch),
+                    z_score(&sf, &sc, ch),
+                ] {
+                    assert!(z < 4.0, "config {k}: {ef:?} {ec:?} {eu:?} {sf:?} {sc:?}");
+                    max_z = max_z.max(z);
+                    n += 1;
                 }
             }
+            let (fell, walks) = forced.fallback_stats();
+            assert!(fell > 0 && fell <= walks);
+            let (fell_closed, _) = closed.fallback_stats();
+            assert!(fell_closed < fell);
         }
+        eprintln!("forced fallback vs closed form and cui: {n} comparisons, max |z| = {max_z:.2}");
+        // Long paths: white, alpha = 3, where walks pass ten bounces.
+        let mf = Microfacet::new(NdfKind::Ggx, 3.0, 3.0);
+        let rough = Bitterli::new(mf, Fresnel::White);
+        let (wi, wo) = (unit(20.0, 0.0), unit(50.0, 140.0));
+        let eb = mean_eval(&rough, wi, wo, 20_000, 3);
+        let eu = mean_eval(&Cui::new(mf, Fresnel::White), wi, wo, 20_000, 4);
+        let (fell, walks) = rough.fallback_stats();
+        let sampled = albedo_by_sampling(&rough, wi, 40_000, 5);
+        let (fell_s, walks_s) = rough.fallback_stats();
+        eprintln!(
+            "alpha 3: eval {:.5} +- {:.5} vs cui {:.5} +- {:.5}; fallback {fell} / {walks} walks \
+             in eval, {} / {} in sampling; white albedo by sampling {:.5} +- {:.5}",
+            eb.value[0],
+            eb.stderr[0],
+            eu.value[0],
+            eu.stderr[0],
+            fell_s - fell,
+            walks_s - walks,
+            sampled.value[0],
+            sampled.stderr[0]
+        );
+        assert!(z_score(&eb, &eu, 0) < 4.0);
+        assert!(fell > 0 && fell_s > fell);
+        assert!((sampled.value[0] - 1.0).abs() <= 4.0 * sampled.stderr[0].max(1e-12));
+    }
+
+    #[test]
+    fn survives_the_finite_sweep() {
+        assert_finite_sweep(
+            |rng| {
+                let (mf, fresnel) = sweep_configuration(rng);
+                Box::new(Bitterli::new(mf, fresnel))
+            },
+            1_000_000,
+            12,
+        );
+    }
+
+    /// Roughness log-uniform in 1e-4..3, anisotropy up to 100, GGX or Beckmann, conductor
+    /// eta 0.01..10, k 0..20 per channel.
+    pub(crate) fn sweep_configuration(rng: &mut Rng) -> (Microfacet<f64>, Fresnel<f64>) {
+        let a = 10f64.powf(rng.random_range(-4.0..0.48));
+        let ndf = if rng.random::<bool>() {
+            NdfKind::Ggx
+        } else {
+            NdfKind::Beckmann
+        };
+        let ratio = 10f64.powf(rng.random_range(-2.0..0.0));
+        let (ax, ay) = if rng.random::<bool>() {
+            (a, a * ratio)
+        } else {
+            (a * ratio, a)
+        };
+        let eta = [0; 3].map(|_| rng.random_range(0.01..10.0));
+        let k = [0; 3].map(|_| rng.random_range(0.0..20.0));
+        (
+            Microfacet::new(ndf, ax, ay),
+            Fresnel::Conductor {
+                eta: crate::scalar::Rgb(eta),
+                k: crate::scalar::Rgb(k),
+            },
+        )
+    }
+
+    #[test]
+    fn time_per_eval() {
+        let mf = Microfacet::new(NdfKind::Ggx, 0.5, 0.5);
+        let (wi, wo) = (unit(30.0, 0.0), unit(45.0, 120.0));
+        for (name, m) in [
+            ("bitterli", Box::new(Bitterli::new(mf, copper())) as Box<dyn Brdf>),
+            ("cui", Box::new(Cui::new(mf, copper()))),
+        ] {
+            let mut rng = rng_stream(1, 0);
+            let n = 50_000;
+            let t = std::time::Instant::now();
+            let mut acc = 0.0;
+            for _ in 0..n {
+                acc += m.eval(wi, wo, &mut rng).multi[0];
+            }
+            eprintln!(
+                "{name}: {:.0} ns per eval at alpha 0.5 (GGX, copper; mean multi {:.4})",
+                t.elapsed().as_nanos() as f64 / n as f64,
+                acc / n as f64
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod probe {
+    use super::*;
+    use crate::albedo::rng_stream;
+    use crate::bsdf::cui::Cui;
+    use crate::bsdf::testing::*;
+    use crate::microfacet::NdfKind;
+
+    struct Part<'a>(&'a dyn Brdf, bool);
+    impl Brdf for Part<'_> {
+        fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
+            let v = self.0.eval(wi, wo, rng);
+            if self.1 { BrdfValue { single: [0.0; 3], multi: v.multi } } else { BrdfValue { single: v.single, multi: [0.0; 3] } }
+        }
+        fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {
+            let s = self.0.sample(wi, u, rng)?;
+            ((s.bounces > 1) == self.1).then_some(s)
+        }
+        fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 { self.0.pdf(wi, wo) }
+        fn is_stochastic(&self) -> bool { true }
+    }
+
+    #[test]
+    fn probe_sampler() {
+        let mf = Microfacet::new(NdfKind::Beckmann, 0.5, 0.5);
+        let wi = unit(35.0, 10.0);
+        let b = Bitterli::new(mf, Fresnel::White);
+        let single = SingleBounce { microfacet: mf, fresnel: Fresnel::White, height: Height::Correlated };
+        for multi in [false, true] {
+            let zb = sampler_matches_eval(&Part(&b, multi), wi, 400_000, 64, 8);
+            eprintln!("multi {multi}: z {zb:.2}");
+        }
+        for n in [400_000, 1_600_000, 6_400_000] {
+            eprintln!("single model n {n}: z {:.2}", sampler_matches_eval(&single, wi, n, 256, 8));
+            let g = SingleBounce { microfacet: Microfacet::new(NdfKind::Ggx, 0.5, 0.5), fresnel: Fresnel::White, height: Height::Correlated };
+            eprintln!("single ggx n {n}: z {:.2}", sampler_matches_eval(&g, wi, n, 256, 8));
+        }
+        for ndf in [NdfKind::Beckmann, NdfKind::Ggx] {
+            let sb = SingleBounce { microfacet: Microfacet::new(ndf, 0.5, 0.5), fresnel: Fresnel::White, height: Height::Correlated };
+            let (nc, np) = (8usize, 16usize);
+            let bin_of = |w: Vec3<f64>| {
+                let i = ((w.z * nc as f64) as usize).min(nc - 1);
+                let j = ((w.y.atan2(w.x).rem_euclid(2.0 * std::f64::consts::PI) / (2.0 * std::f64::consts::PI) * np as f64) as usize).min(np - 1);
+                i * np + j
+            };
+            let mut hist = vec![0.0; nc * np];
+            let mut rng = rng_stream(5, 0);
+            let n = 4_000_000;
+            for _ in 0..n {
+                let u = [rand::Rng::random::<f64>(&mut rng), rand::Rng::random::<f64>(&mut rng)];
+                if let Some((wo, w)) = sb.sample_weighted(wi, u) { hist[bin_of(wo)] += w.0[0]; }
+            }
+            let mut chi = 0.0; let mut worst = (0.0f64, 0, 0.0, 0.0);
+            for b in 0..nc * np {
+                let (i, j) = (b / np, b % np);
+                let q = 48;
+                let mut e = 0.0;
+                for a in 0..q { for c in 0..q {
+                    let z = (i as f64 + (a as f64 + 0.5) / q as f64) / nc as f64;
+                    let phi = 2.0 * std::f64::consts::PI * (j as f64 + (c as f64 + 0.5) / q as f64) / np as f64;
+                    let r = (1.0 - z * z).sqrt();
+                    let wo = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+                    e += sb.eval(wi, wo).0[0] * z;
+                }}
+                e *= 2.0 * std::f64::consts::PI / (nc * np) as f64 / (q * q) as f64;
+                let m = hist[b] / n as f64;
+                let sd = (m / n as f64).sqrt().max(1e-12);
+                let z = (m - e) / sd;
+                chi += z * z;
+                if z.abs() > worst.0.abs() { worst = (z, b, m, e); }
+            }
+            eprintln!("{ndf:?}: chi2 {chi:.1} over {} bins, worst {worst:?}", nc * np);
+        }
+        {
+            use std::f64::consts::PI;
+            let bc = Bitterli::new(mf, Fresnel::White); let cu = Cui::new(mf, Fresnel::White); let brdf: &dyn Brdf = if std::env::var("CUI").is_ok() { &cu } else { &bc };
+            let (n_cos, n_phi) = (8usize, 16usize);
+            let bins = n_cos * n_phi;
+            let bin_of = |w: Vec3<f64>| {
+                let i = ((w.z * n_cos as f64) as usize).min(n_cos - 1);
+                let j = ((w.y.atan2(w.x).rem_euclid(2.0 * PI) / (2.0 * PI) * n_phi as f64) as usize).min(n_phi - 1);
+                i * n_phi + j
+            };
+            let mut rng = rng_stream(8, 2);
+            let samples = 400_000;
+            let (mut hist, mut hist2) = (vec![0.0; bins], vec![0.0; bins]);
+            for _ in 0..samples {
+                let u = [rand::Rng::random::<f64>(&mut rng), rand::Rng::random::<f64>(&mut rng)];
+                if let Some(s) = brdf.sample(wi, u, &mut rng) {
+                    if s.wo.z > 0.0 { let b = bin_of(s.wo); hist[b] += s.weight[0]; hist2[b] += s.weight[0] * s.weight[0]; }
+                }
+            }
+            let bin_area = 2.0 * PI / bins as f64;
+            let side = 8;
+            for b in 0..bins {
+                let n = samples as f64;
+                let mean_s = hist[b] / n;
+                let var_s = (hist2[b] / n - mean_s * mean_s).max(0.0) / n;
+                let (i, j) = (b / n_phi, b % n_phi);
+                let (mut sum, mut sum2) = (0.0, 0.0);
+                for q in 0..side * side {
+                    let (a, c) = ((q / side) as f64, (q % side) as f64);
+                    let z = (i as f64 + (a + rand::Rng::random::<f64>(&mut rng)) / side as f64) / n_cos as f64;
+                    let phi = 2.0 * PI * (j as f64 + (c + rand::Rng::random::<f64>(&mut rng)) / side as f64) / n_phi as f64;
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    let wo = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+                    let v = brdf.eval(wi, wo, &mut rng).total()[0] * z * bin_area;
+                    sum += v; sum2 += v * v;
+                }
+                let m = (side * side) as f64;
+                let mean_e = sum / m;
+                let var_e = (sum2 / m - mean_e * mean_e).max(0.0) / m;
+                let zz = (mean_s - mean_e) / (var_s + var_e).sqrt();
+                if zz.abs() > 3.0 { eprintln!("bin {b} (i {i} j {j}): s {mean_s:.6} e {mean_e:.6} sd_s {:.2e} sd_e {:.2e} z {zz:.1}", var_s.sqrt(), var_e.sqrt()); }
+            }
+        }
+        // first-bounce exit histogram vs f1 cos
+        let mut rng = rng_stream(1, 0);
+        let n = 2_000_000;
+        let mut cnt = 0.0;
+        for _ in 0..n {
+            let u = [rand::Rng::random::<f64>(&mut rng), rand::Rng::random::<f64>(&mut rng)];
+            let m = mf.sample_visible(wi, u);
+            let wo = wi.reflect(m);
+            if wo.z > 0.0 { cnt += 1.0; }
+        }
+        eprintln!("P(d1 up) by sampler {}", cnt / n as f64);
+        let _ = Cui::new(mf, Fresnel::White);
     }
 }

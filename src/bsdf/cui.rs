@@ -291,3 +291,80 @@ impl Brdf for Cui {
         true
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::position_free::checks::{assert_furnace, furnace};
+    use crate::bsdf::testing::assert_finite_sweep;
+
+    #[test]
+    fn white_furnace() {
+        let rows = furnace(
+            &|mf| Box::new(Cui::new(mf, Fresnel::White)),
+            100_000,
+            100_000,
+            11,
+        );
+        assert_furnace("cui", &rows);
+    }
+
+    #[test]
+    fn segment_term_dp_matches_the_invariance_recursion() {
+        // S(a..b) = (sum_{m=a}^{b-1} S(a..m) S(m+1..b)) / (sigma_a + sigma_b), S(a..a) = 1,
+        // zero unless d_a is downward and d_b upward: the interval recursion, O(k^3).
+        fn by_intervals(l: &[f64]) -> f64 {
+            let n = l.len();
+            let mut s = vec![vec![0.0; n]; n];
+            for (a, row) in s.iter_mut().enumerate() {
+                row[a] = 1.0;
+            }
+            for len in 1..n {
+                for a in 0..n - len {
+                    let b = a + len;
+                    if l[a] >= 0.0 || l[b] < 0.0 {
+                        continue;
+                    }
+                    let sum: f64 = (a..b).map(|m| s[a][m] * s[m + 1][b]).sum();
+                    s[a][b] = sum / (l[a].abs() + l[b]);
+                }
+            }
+            s[0][n - 1]
+        }
+        let mut rng = crate::albedo::rng_stream(3, 0);
+        use rand::Rng as _;
+        for k in 1..=8 {
+            for _ in 0..300 {
+                let l: Vec<f64> = (0..=k)
+                    .map(|i| {
+                        let x = rng.random_range(0.05..4.0);
+                        if i == 0 || (i < k && rng.random::<bool>()) {
+                            -1.0 - x
+                        } else {
+                            x
+                        }
+                    })
+                    .collect();
+                let (dp, iv) = (segment_term(&l), by_intervals(&l));
+                assert!((dp - iv).abs() <= 1e-13 * iv, "{l:?}: {dp} vs {iv}");
+            }
+        }
+        // Supp. Alg. 1 as printed gives 1/((so+s0)(s0+s1)) for down, up, down, up.
+        let (s0, s1, s2, so) = (1.5, 0.7, 2.5, 0.3);
+        let exact = 1.0 / ((s0 + s1) * (s0 + so) * (s2 + so));
+        assert!((segment_term(&[-s0, s1, -s2, so]) - exact).abs() < 1e-15);
+        assert!((1.0 / ((so + s0) * (s0 + s1)) - exact).abs() > 0.1 * exact);
+    }
+
+    #[test]
+    fn survives_the_finite_sweep() {
+        assert_finite_sweep(
+            |rng| {
+                let (mf, fresnel) = crate::bsdf::bitterli::tests::sweep_configuration(rng);
+                Box::new(Cui::new(mf, fresnel))
+            },
+            1_000_000,
+            13,
+        );
+    }
+}
