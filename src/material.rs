@@ -188,7 +188,10 @@ impl Material {
             Model::Single => Box::new(self.single::<f64>()),
             Model::Bitterli => {
                 let s = self.single::<f64>();
-                Box::new(crate::bsdf::bitterli::Bitterli::new(s.microfacet, s.fresnel))
+                Box::new(crate::bsdf::bitterli::Bitterli::new(
+                    s.microfacet,
+                    s.fresnel,
+                ))
             }
             Model::Cui => {
                 let s = self.single::<f64>();

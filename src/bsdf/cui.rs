@@ -45,9 +45,7 @@
 //! - Alg. 2 and 3 stop at `maxBounce` (biased); here Russian roulette from the remaining
 //!   energy ends the walk of `eval` (as in `bitterli`) and `sample` walks until it exits.
 
-use super::position_free::{
-    connect, mis_pdf, scatter, signed_lambda, survival, MAX_WALK_BOUNCES,
-};
+use super::position_free::{connect, mis_pdf, scatter, signed_lambda, survival, MAX_WALK_BOUNCES};
 use super::single::SingleBounce;
 use super::{Brdf, BrdfSample, BrdfValue, Rng};
 use crate::microfacet::{Fresnel, Height, Microfacet};
@@ -189,7 +187,7 @@ impl Cui {
             }
             // Russian roulette from the energy left: mass = prod_{t<=i} |Lambda(d_t)| H(0).
             let q = survival(&w, lambdas * s.abs() * seg.eval(0.0));
-            if !(q > 0.0) {
+            if q <= 0.0 {
                 break;
             }
             if q < 1.0 {

@@ -78,7 +78,7 @@ pub(crate) fn scatter(
 pub(crate) fn connect(d: Vec3<f64>, out: Vec3<f64>) -> Option<(Vec3<f64>, f64)> {
     let sum = out - d;
     let len = sum.length();
-    if !(len > 1e-300) {
+    if len.is_nan() || len <= 1e-300 {
         return None;
     }
     let h = sum * (1.0 / len);
@@ -210,10 +210,17 @@ pub(crate) mod checks {
                     let wi = unit(theta, 25.0);
                     let k = rows.len() as u64;
                     let mut by_eval = albedo_by_eval(&*model, &guide, wi, n_eval, seed + 3 * k);
-                    let se = by_eval.stderr[0];
-                    if se > TARGET_STDERR {
-                        let n = (n_eval as f64 * (se / TARGET_STDERR).powi(2)).ceil() as usize;
-                        by_eval = albedo_by_eval(&*model, &guide, wi, n, seed + 3 * k + 1);
+                    // Heavy tails (cui at low roughness) can under-report the variance of the
+                    // first run: size again from each new measurement, up to three times.
+                    let mut n = n_eval;
+                    for retry in 0..3u64 {
+                        let se = by_eval.stderr[0];
+                        if se <= TARGET_STDERR {
+                            break;
+                        }
+                        n = (n as f64 * 1.3 * (se / TARGET_STDERR).powi(2)).ceil() as usize;
+                        by_eval =
+                            albedo_by_eval(&*model, &guide, wi, n, seed + 3 * k + 1 + 1000 * retry);
                     }
                     rows.push(FurnaceRow {
                         ndf,
