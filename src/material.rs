@@ -193,6 +193,17 @@ impl Material {
                 self.single::<f64>(),
             )),
             Model::Turquin => Box::new(crate::bsdf::turquin::Turquin::new(self.single::<f64>())),
+            Model::Bitterli => {
+                let s = self.single::<f64>();
+                Box::new(crate::bsdf::bitterli::Bitterli::new(
+                    s.microfacet,
+                    s.fresnel,
+                ))
+            }
+            Model::Cui => {
+                let s = self.single::<f64>();
+                Box::new(crate::bsdf::cui::Cui::new(s.microfacet, s.fresnel))
+            }
         }
     }
 }

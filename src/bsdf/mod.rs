@@ -11,13 +11,18 @@
 //! | `fast-msx` | [`fast_msx`] | analytic second bounce, Rosales et al. 2023; not energy conserving, not reciprocal |
 //! | `kulla-conty` | [`kulla_conty`] | tabulated energy compensation lobe, Kulla & Conty 2017; reciprocal |
 //! | `turquin` | [`turquin`] | tabulated scaling of the single lobe, Turquin 2019; not reciprocal |
+//! | `bitterli` | [`bitterli`] | stochastic, position-free, unbiased; Bitterli & d'Eon 2022 |
+//! | `cui` | [`cui`] | stochastic, position-free, unbiased; Cui et al. 2023 |
 
 pub mod albedo_table;
+pub mod bitterli;
 #[cfg(test)]
 mod compensation_tests;
+pub mod cui;
 pub mod fast_msx;
 pub mod kulla_conty;
 pub mod lobe_mixture;
+mod position_free;
 pub mod single;
 #[cfg(test)]
 pub(crate) mod testing;
@@ -91,11 +96,17 @@ pub enum Model {
     KullaConty,
     /// Turquin 2019: single scaled by a tabulated compensation factor.
     Turquin,
+    /// Bitterli & d'Eon 2022: position-free, hyperexponential heights, unbiased.
+    Bitterli,
+    /// Cui et al. 2023: position-free, segment term by dynamic programming, unbiased.
+    Cui,
 }
 
 impl Model {
-    pub const ALL: [Model; 4] = [
+    pub const ALL: [Model; 6] = [
         Model::Single,
+        Model::Bitterli,
+        Model::Cui,
         Model::FastMsx,
         Model::KullaConty,
         Model::Turquin,
@@ -107,6 +118,8 @@ impl Model {
             Model::FastMsx => "fast-msx",
             Model::KullaConty => "kulla-conty",
             Model::Turquin => "turquin",
+            Model::Bitterli => "bitterli",
+            Model::Cui => "cui",
         }
     }
 }

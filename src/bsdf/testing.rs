@@ -139,16 +139,19 @@ pub fn sampler_matches_eval(
         i * n_phi + j
     };
     let mut rng = rng_stream(seed, 2);
-    let (mut hist, mut hist2) = (vec![0.0; bins], vec![0.0; bins]);
+    let (mut hist, mut hist2, mut counts) = (vec![0.0; bins], vec![0.0; bins], vec![0usize; bins]);
     for _ in 0..samples {
         if let Some(s) = brdf.sample(wi, [rng.random(), rng.random()], &mut rng) {
             if s.wo.z > 0.0 {
                 let b = bin_of(s.wo);
                 hist[b] += s.weight[0];
                 hist2[b] += s.weight[0] * s.weight[0];
+                counts[b] += 1;
             }
         }
     }
+    let total_count: usize = counts.iter().sum();
+    let mean_weight = hist.iter().sum::<f64>() / total_count.max(1) as f64;
     let bin_area = 2.0 * PI / bins as f64;
     let side = (points_per_bin as f64).sqrt().ceil() as usize;
     let mut chi2 = 0.0;
@@ -172,6 +175,15 @@ pub fn sampler_matches_eval(
         let m = (side * side) as f64;
         let mean_e = sum / m;
         let var_e = (sum2 / m - mean_e * mean_e).max(0.0) / m;
+        // A bin the sampler rarely reaches has a sample variance near zero by chance: floor it
+        // at the Poisson variance of a mean built from N * mean_e / w draws of weight w
+        // (w: the bin's mean weight, or the overall mean weight if the bin is empty).
+        let w_ref = if counts[b] > 0 {
+            hist[b] / counts[b] as f64
+        } else {
+            mean_weight
+        };
+        let var_s = var_s.max(mean_e.max(0.0) * w_ref / n);
         let var = var_s + var_e;
         if var > 0.0 {
             chi2 += (mean_s - mean_e).powi(2) / var;
