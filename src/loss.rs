@@ -3,7 +3,11 @@
 //! | loss | per pixel and channel | use |
 //! | --- | --- | --- |
 //! | `l2` | `(p - t)^2` | Gaussian noise of constant level; the default |
-//! | `log-l1` | `|ln(1 + p/s) - ln(1 + t/s)|`, `s` = mean target radiance | highlights and dark regions on an equal footing (robust to outliers) |
+//! | `log-l1` | `rho(ln(1 + p/s) - ln(1 + t/s))`, `s` = mean target radiance, `rho(x) = sqrt(x^2 + d^2) - d` with `d = 1e-3` | highlights and dark regions on an equal footing (robust to outliers) |
+//!
+//! `rho` is the pseudo-Huber (Charbonnier) form of `|x|`: equal to it within `d` = 0.1% of
+//! relative radiance, and differentiable at the optimum, where the kink of `|x|` stalls
+//! gradient-based solvers (plain L1 left the red F0 of the copper set at 0.982 instead of 0.935).
 //!
 //! Both are weighted means (`sum w loss / (3 sum w)`), so their values compare across photo sets
 //! of different sizes.
@@ -17,6 +21,9 @@ pub enum LossKind {
     L2,
     LogL1,
 }
+
+/// Width `d` of the pseudo-Huber smoothing of the log-L1 loss, in log units.
+const LOG_L1_SMOOTHING: f64 = 1e-3;
 
 /// A loss bound to the targets and weights of the pixels it compares.
 pub struct Loss<'a> {
@@ -50,9 +57,11 @@ impl<'a> Loss<'a> {
         (0..3)
             .map(|c| match self.kind {
                 LossKind::L2 => (predicted[c] - t[c]).powi(2),
-                LossKind::LogL1 => ((predicted[c] / self.scale).ln_1p()
-                    - (t[c].max(0.0) / self.scale).ln_1p())
-                .abs(),
+                LossKind::LogL1 => {
+                    let x =
+                        (predicted[c] / self.scale).ln_1p() - (t[c].max(0.0) / self.scale).ln_1p();
+                    (x * x + LOG_L1_SMOOTHING * LOG_L1_SMOOTHING).sqrt() - LOG_L1_SMOOTHING
+                }
             })
             .sum()
     }
