@@ -8,7 +8,9 @@
 //! | model | file | kind |
 //! | --- | --- | --- |
 //! | `single` | [`single`] | analytic, Walter et al. 2007 |
+//! | `heitz` | [`heitz`] | stochastic random walk with explicit heights, Heitz et al. 2016 (the reference) |
 
+pub mod heitz;
 pub mod single;
 #[cfg(test)]
 pub(crate) mod testing;
@@ -75,14 +77,18 @@ pub trait Brdf: Send + Sync {
 pub enum Model {
     /// Walter et al. 2007: analytic, loses the energy of multiple bounces.
     Single,
+    /// Heitz et al. 2016: random walk on the Smith microsurface with explicit heights,
+    /// unbiased, energy conserving, reciprocal; the reference of the multi-bounce models.
+    Heitz,
 }
 
 impl Model {
-    pub const ALL: [Model; 1] = [Model::Single];
+    pub const ALL: [Model; 2] = [Model::Single, Model::Heitz];
 
     pub fn name(self) -> &'static str {
         match self {
             Model::Single => "single",
+            Model::Heitz => "heitz",
         }
     }
 }
