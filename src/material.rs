@@ -4,6 +4,7 @@
 //! A fit file is a material file with more fields (loss, trace, timings), so reading ignores
 //! fields it does not know.
 
+use crate::bsdf::heitz::Heitz;
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::{Brdf, Model};
 use crate::error::{Error, Result};
@@ -183,6 +184,7 @@ impl Material {
     }
 
     /// The specular model as a BRDF object (the diffuse layer is added by the renderer).
+    /// `heitz` ignores `height`: its first order is the height-correlated single bounce.
     pub fn brdf(&self) -> Box<dyn Brdf> {
         match self.model {
             Model::Single => Box::new(self.single::<f64>()),
@@ -203,6 +205,10 @@ impl Material {
             Model::Cui => {
                 let s = self.single::<f64>();
                 Box::new(crate::bsdf::cui::Cui::new(s.microfacet, s.fresnel))
+            }
+            Model::Heitz => {
+                let single = self.single::<f64>();
+                Box::new(Heitz::new(single.microfacet, single.fresnel))
             }
         }
     }

@@ -108,6 +108,51 @@ fn albedo_json_reports_energy_loss_of_single() {
 }
 
 #[test]
+fn heitz_through_the_cli_conserves_energy_and_reports_its_noise() {
+    let out = run_ok(&[
+        "albedo",
+        "--model",
+        "heitz",
+        "--alpha",
+        "1.0",
+        "--theta-i",
+        "60",
+        "--samples",
+        "4096",
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    // White Fresnel: every sampled walk escapes with weight 1.
+    assert_eq!(triple(&v["albedo"]), [1.0; 3]);
+    let args = |wi: &'static str, wo: &'static str| {
+        [
+            "--model",
+            "heitz",
+            "--alpha",
+            "0.6",
+            "--fresnel",
+            COPPER,
+            "--wi",
+            wi,
+            "--wo",
+            wo,
+            "--samples",
+            "20000",
+        ]
+    };
+    let f = brdf_json(&args("1,0,2", "-0.3,0.4,1"));
+    let g = brdf_json(&args("-0.3,0.4,1", "1,0,2"));
+    let (fm, gm) = (triple(&f["f_multi"]), triple(&g["f_multi"]));
+    let (se_f, se_g) = (triple(&f["stderr"]), triple(&g["stderr"]));
+    assert_eq!(triple(&f["f_single"]), triple(&g["f_single"]));
+    for c in 0..3 {
+        assert!(fm[c] > 0.0 && se_f[c] > 0.0 && se_f[c] < 0.05 * fm[c]);
+        // Reciprocal within the reported noise.
+        assert!((fm[c] - gm[c]).abs() < 4.0 * (se_f[c].powi(2) + se_g[c].powi(2)).sqrt());
+    }
+}
+
+#[test]
 fn render_of_the_true_material_reproduces_the_bundled_photos() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("render");

@@ -13,6 +13,7 @@
 //! | `turquin` | [`turquin`] | tabulated scaling of the single lobe, Turquin 2019; not reciprocal |
 //! | `bitterli` | [`bitterli`] | stochastic, position-free, unbiased; Bitterli & d'Eon 2022 |
 //! | `cui` | [`cui`] | stochastic, position-free, unbiased; Cui et al. 2023 |
+//! | `heitz` | [`heitz`] | stochastic random walk with explicit heights, Heitz et al. 2016 (the reference) |
 
 pub mod albedo_table;
 pub mod bitterli;
@@ -20,6 +21,7 @@ pub mod bitterli;
 mod compensation_tests;
 pub mod cui;
 pub mod fast_msx;
+pub mod heitz;
 pub mod kulla_conty;
 pub mod lobe_mixture;
 mod position_free;
@@ -100,11 +102,15 @@ pub enum Model {
     Bitterli,
     /// Cui et al. 2023: position-free, segment term by dynamic programming, unbiased.
     Cui,
+    /// Heitz et al. 2016: random walk on the Smith microsurface with explicit heights,
+    /// unbiased, energy conserving, reciprocal; the reference of the multi-bounce models.
+    Heitz,
 }
 
 impl Model {
-    pub const ALL: [Model; 6] = [
+    pub const ALL: [Model; 7] = [
         Model::Single,
+        Model::Heitz,
         Model::Bitterli,
         Model::Cui,
         Model::FastMsx,
@@ -120,6 +126,7 @@ impl Model {
             Model::Turquin => "turquin",
             Model::Bitterli => "bitterli",
             Model::Cui => "cui",
+            Model::Heitz => "heitz",
         }
     }
 }
