@@ -30,31 +30,53 @@ pub fn random_upper(rng: &mut Rng) -> Vec3<f64> {
 /// Mean of `n` independent evaluations of `f(wi, wo)` with its standard error.
 pub fn mean_eval(brdf: &dyn Brdf, wi: Vec3<f64>, wo: Vec3<f64>, n: usize, seed: u64) -> Estimate {
     let mut rng = rng_stream(seed, 0);
-    let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
+    let mut stats = Moments::default();
     for _ in 0..n {
-        let f = brdf.eval(wi, wo, &mut rng).total();
-        for c in 0..3 {
-            sum[c] += f[c];
-            sum2[c] += f[c] * f[c];
-        }
+        stats.push(brdf.eval(wi, wo, &mut rng).total());
     }
-    finish(sum, sum2, n)
+    stats.estimate()
 }
 
-fn finish(sum: [f64; 3], sum2: [f64; 3], n: usize) -> Estimate {
-    let nf = n as f64;
-    let value = sum.map(|s| s / nf);
-    let stderr = [0, 1, 2].map(|c| {
-        if n > 1 {
-            ((sum2[c] / nf - value[c] * value[c]).max(0.0) / (nf - 1.0)).sqrt()
-        } else {
-            0.0
+/// Running mean and variance per channel, accumulated on values shifted by the first one: the
+/// constant exact single-bounce part would otherwise swamp the tiny multi-bounce fluctuations in
+/// `E[x^2] - E[x]^2` (a 1e-9 spread on top of 0.45 rounded to a zero variance).
+#[derive(Default)]
+pub struct Moments {
+    shift: Option<[f64; 3]>,
+    sum: [f64; 3],
+    sum2: [f64; 3],
+    n: usize,
+}
+
+impl Moments {
+    pub fn push(&mut self, x: [f64; 3]) {
+        let shift = *self.shift.get_or_insert(x);
+        for c in 0..3 {
+            let d = x[c] - shift[c];
+            self.sum[c] += d;
+            self.sum2[c] += d * d;
         }
-    });
-    Estimate {
-        value,
-        stderr,
-        samples: n,
+        self.n += 1;
+    }
+
+    pub fn estimate(&self) -> Estimate {
+        let shift = self.shift.unwrap_or([0.0; 3]);
+        let nf = self.n.max(1) as f64;
+        let mean_shifted = self.sum.map(|s| s / nf);
+        let value = [0, 1, 2].map(|c| shift[c] + mean_shifted[c]);
+        let stderr = [0, 1, 2].map(|c| {
+            if self.n > 1 {
+                ((self.sum2[c] / nf - mean_shifted[c] * mean_shifted[c]).max(0.0) / (nf - 1.0))
+                    .sqrt()
+            } else {
+                0.0
+            }
+        });
+        Estimate {
+            value,
+            stderr,
+            samples: self.n,
+        }
     }
 }
 
@@ -86,31 +108,31 @@ pub fn albedo_by_eval(
     seed: u64,
 ) -> Estimate {
     let mut rng = rng_stream(seed, 1);
-    let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
+    let mut stats = Moments::default();
     for _ in 0..n {
         let u = [rng.random(), rng.random()];
-        let wo = if rng.random::<f64>() < 0.5 {
-            match guide.sample_weighted(wi, u) {
-                Some((wo, _)) => wo,
-                None => continue,
-            }
+        let drawn = if rng.random::<f64>() < 0.5 {
+            guide.sample_weighted(wi, u).map(|(wo, _)| wo)
         } else {
             let r = u[0].sqrt();
             let phi = 2.0 * PI * u[1];
-            Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u[0]).max(0.0).sqrt())
+            Some(Vec3::new(
+                r * phi.cos(),
+                r * phi.sin(),
+                (1.0 - u[0]).max(0.0).sqrt(),
+            ))
         };
-        if wo.z <= 0.0 {
-            continue;
-        }
-        let pdf = 0.5 * guide.pdf(wi, wo) + 0.5 * wo.z * FRAC_1_PI;
-        let f = brdf.eval(wi, wo, &mut rng).total();
-        for c in 0..3 {
-            let v = f[c] * wo.z / pdf;
-            sum[c] += v;
-            sum2[c] += v * v;
-        }
+        // A draw below the horizon contributes zero (it still counts in the mean).
+        let value = match drawn.filter(|wo| wo.z > 0.0) {
+            Some(wo) => {
+                let pdf = 0.5 * guide.pdf(wi, wo) + 0.5 * wo.z * FRAC_1_PI;
+                brdf.eval(wi, wo, &mut rng).total().map(|f| f * wo.z / pdf)
+            }
+            None => [0.0; 3],
+        };
+        stats.push(value);
     }
-    finish(sum, sum2, n)
+    stats.estimate()
 }
 
 /// Upper-tail standard normal deviate of a chi-square statistic (Wilson-Hilferty).
