@@ -5,6 +5,7 @@
 //! fields it does not know.
 
 use crate::bsdf::single::SingleBounce;
+use crate::bsdf::wang::{Wang, WangEstimator};
 use crate::bsdf::{Brdf, Model};
 use crate::error::{Error, Result};
 use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
@@ -186,6 +187,8 @@ impl Material {
     pub fn brdf(&self) -> Box<dyn Brdf> {
         match self.model {
             Model::Single => Box::new(self.single::<f64>()),
+            Model::WangPt => Box::new(Wang::new(self.single(), WangEstimator::PathTracing)),
+            Model::WangBdpt => Box::new(Wang::new(self.single(), WangEstimator::Bidirectional)),
         }
     }
 }

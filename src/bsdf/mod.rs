@@ -8,8 +8,10 @@
 //! | model | file | kind |
 //! | --- | --- | --- |
 //! | `single` | [`single`] | analytic, Walter et al. 2007 |
+//! | `wang-pt`, `wang-bdpt` | [`wang`] | stochastic, position-free path integral, Wang et al. 2022 |
 
 pub mod single;
+pub mod wang;
 #[cfg(test)]
 pub(crate) mod testing;
 #[cfg(test)]
@@ -75,14 +77,20 @@ pub trait Brdf: Send + Sync {
 pub enum Model {
     /// Walter et al. 2007: analytic, loses the energy of multiple bounces.
     Single,
+    /// Wang et al. 2022, position-free path integral estimated by path tracing.
+    WangPt,
+    /// Wang et al. 2022, position-free path integral estimated bidirectionally.
+    WangBdpt,
 }
 
 impl Model {
-    pub const ALL: [Model; 1] = [Model::Single];
+    pub const ALL: [Model; 3] = [Model::Single, Model::WangPt, Model::WangBdpt];
 
     pub fn name(self) -> &'static str {
         match self {
             Model::Single => "single",
+            Model::WangPt => "wang-pt",
+            Model::WangBdpt => "wang-bdpt",
         }
     }
 }
