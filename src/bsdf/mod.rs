@@ -11,11 +11,11 @@
 //! | `wang-pt`, `wang-bdpt` | [`wang`] | stochastic, position-free path integral, Wang et al. 2022 |
 
 pub mod single;
-pub mod wang;
 #[cfg(test)]
 pub(crate) mod testing;
 #[cfg(test)]
 mod tests;
+pub mod wang;
 
 use crate::scalar::Vec3;
 use serde::{Deserialize, Serialize};
