@@ -968,43 +968,70 @@ mod tests {
         );
     }
 
-    /// Energy conservation to 0.1-0.2%: the exact single-bounce albedo (the deterministic
-    /// quadrature of `albedo_by_sampling` on `single`, error ~1e-5) plus the multi-bounce part
-    /// of `eval` integrated by cosine sampling (it is broad, so this has low variance).
+    /// `E_single + integral multi cos`: the exact single-bounce albedo (the deterministic
+    /// quadrature of `albedo_by_sampling` on `single`, error below 1e-5) plus the multi-bounce
+    /// part of `eval` integrated by cosine sampling (it is broad, so this has low variance).
+    /// Returns `(single, multi, combined standard error)`; the quadrature's error estimate,
+    /// with a floor of 1e-5, is part of the latter.
+    fn single_plus_multi(m: &Wang, wi: Vec3<f64>, n: usize, seed: u64) -> (f64, f64, f64) {
+        let quadrature = albedo_by_sampling(&m.surface, wi, 250_000, 1);
+        let single = quadrature.value[0];
+        let mut rng = rng_stream(seed, 0);
+        let (mut s1, mut s2) = (0.0, 0.0);
+        for _ in 0..n {
+            let u: [f64; 2] = [rng.random(), rng.random()];
+            let (r, phi) = (u[0].sqrt(), std::f64::consts::TAU * u[1]);
+            let wo = Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u[0]).sqrt());
+            let x = m.eval(wi, wo, &mut rng).multi[0] * std::f64::consts::PI;
+            s1 += x;
+            s2 += x * x;
+        }
+        let multi = s1 / n as f64;
+        let se2 = (s2 / n as f64 - multi * multi) / (n - 1) as f64;
+        (
+            single,
+            multi,
+            (se2 + quadrature.stderr[0].max(1e-5).powi(2)).sqrt(),
+        )
+    }
+
+    /// Energy conservation, more finely than the furnace: to 0.1-0.2% at alpha 1 for both
+    /// estimators, and to about 1e-4 for BDPT at low roughness (GGX 0.1, Beckmann 0.3), where
+    /// the multi-bounce part is 1-2% of the energy (PT's estimate there is heavy-tailed: for GGX
+    /// 0.1 its largest sample in 4e6 was 3954 against a mean of 0.012, so it is checked by the
+    /// furnace only).
     #[test]
     fn single_plus_multi_is_one() {
         let mut worst: f64 = 0.0;
+        let mut cases = Vec::new();
         for ndf in NDFS {
             for height in HEIGHTS {
                 for estimator in ESTIMATORS {
-                    for theta in [0.0] {
-                        let m = wang(ndf, 1.0, 1.0, FresnelSpec::White, height, estimator);
-                        let wi = unit(theta, 20.0);
-                        let single = albedo_by_sampling(&m.surface, wi, 250_000, 1).value[0];
-                        let mut rng = rng_stream(17, theta as u64);
-                        let n = 120_000;
-                        let (mut s1, mut s2) = (0.0, 0.0);
-                        for _ in 0..n {
-                            let u: [f64; 2] = [rng.random(), rng.random()];
-                            let (r, phi) = (u[0].sqrt(), std::f64::consts::TAU * u[1]);
-                            let wo = Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u[0]).sqrt());
-                            let x = m.eval(wi, wo, &mut rng).multi[0] * std::f64::consts::PI;
-                            s1 += x;
-                            s2 += x * x;
-                        }
-                        let multi = s1 / n as f64;
-                        let se = ((s2 / n as f64 - multi * multi) / (n - 1) as f64).sqrt();
-                        let z = (single + multi - 1.0) / se;
-                        worst = worst.max(z.abs());
-                        eprintln!(
-                            "single + multi | {ndf:?} {height:?} {estimator:?} alpha 1 theta {theta} | \
-                             {single:.5} + {multi:.5} +- {se:.5} = {:.5} (z {z:.2})",
-                            single + multi
-                        );
-                        assert!(z.abs() < 4.0 && se < 0.0025, "z {z}, se {se}");
-                    }
+                    cases.push((ndf, height, estimator, 1.0, 120_000, 0.0025));
                 }
+                // Beckmann at alpha 0.1 has no multi-bounce energy at normal incidence.
+                let low = if ndf == NdfKind::Ggx { 0.1 } else { 0.3 };
+                cases.push((
+                    ndf,
+                    height,
+                    WangEstimator::Bidirectional,
+                    low,
+                    100_000,
+                    1e-4,
+                ));
             }
+        }
+        for (k, (ndf, height, estimator, alpha, n, max_se)) in cases.into_iter().enumerate() {
+            let m = wang(ndf, alpha, alpha, FresnelSpec::White, height, estimator);
+            let (single, multi, se) = single_plus_multi(&m, unit(0.0, 0.0), n, 17 + k as u64);
+            let z = (single + multi - 1.0) / se;
+            worst = worst.max(z.abs());
+            eprintln!(
+                "single + multi | {ndf:?} {height:?} {estimator:?} alpha {alpha} theta 0 | \
+                 {single:.6} + {multi:.6} +- {se:.6} = {:.6} (z {z:.2})",
+                single + multi
+            );
+            assert!(z.abs() < 4.0 && se < max_se, "z {z}, se {se}");
         }
         eprintln!("single + multi: max |z| {worst:.2}");
     }
