@@ -6,6 +6,7 @@
 
 use crate::bsdf::heitz::Heitz;
 use crate::bsdf::single::SingleBounce;
+use crate::bsdf::wang::{Wang, WangEstimator};
 use crate::bsdf::{Brdf, Model};
 use crate::error::{Error, Result};
 use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
@@ -210,6 +211,8 @@ impl Material {
                 let single = self.single::<f64>();
                 Box::new(Heitz::new(single.microfacet, single.fresnel))
             }
+            Model::WangPt => Box::new(Wang::new(self.single(), WangEstimator::PathTracing)),
+            Model::WangBdpt => Box::new(Wang::new(self.single(), WangEstimator::Bidirectional)),
         }
     }
 }

@@ -14,6 +14,7 @@
 //! | `bitterli` | [`bitterli`] | stochastic, position-free, unbiased; Bitterli & d'Eon 2022 |
 //! | `cui` | [`cui`] | stochastic, position-free, unbiased; Cui et al. 2023 |
 //! | `heitz` | [`heitz`] | stochastic random walk with explicit heights, Heitz et al. 2016 (the reference) |
+//! | `wang-pt`, `wang-bdpt` | [`wang`] | stochastic, position-free path integral, Wang et al. 2022 |
 
 pub mod albedo_table;
 pub mod bitterli;
@@ -31,6 +32,7 @@ pub(crate) mod testing;
 #[cfg(test)]
 mod tests;
 pub mod turquin;
+pub mod wang;
 
 use crate::scalar::Vec3;
 use serde::{Deserialize, Serialize};
@@ -105,14 +107,20 @@ pub enum Model {
     /// Heitz et al. 2016: random walk on the Smith microsurface with explicit heights,
     /// unbiased, energy conserving, reciprocal; the reference of the multi-bounce models.
     Heitz,
+    /// Wang et al. 2022, position-free path integral estimated by path tracing.
+    WangPt,
+    /// Wang et al. 2022, position-free path integral estimated bidirectionally.
+    WangBdpt,
 }
 
 impl Model {
-    pub const ALL: [Model; 7] = [
+    pub const ALL: [Model; 9] = [
         Model::Single,
         Model::Heitz,
         Model::Bitterli,
         Model::Cui,
+        Model::WangPt,
+        Model::WangBdpt,
         Model::FastMsx,
         Model::KullaConty,
         Model::Turquin,
@@ -127,6 +135,8 @@ impl Model {
             Model::Bitterli => "bitterli",
             Model::Cui => "cui",
             Model::Heitz => "heitz",
+            Model::WangPt => "wang-pt",
+            Model::WangBdpt => "wang-bdpt",
         }
     }
 }
