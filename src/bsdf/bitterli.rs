@@ -996,30 +996,4 @@ pub(crate) mod tests {
             },
         )
     }
-
-    #[test]
-    fn time_per_eval() {
-        let mf = Microfacet::new(NdfKind::Ggx, 0.5, 0.5);
-        let (wi, wo) = (unit(30.0, 0.0), unit(45.0, 120.0));
-        for (name, m) in [
-            (
-                "bitterli",
-                Box::new(Bitterli::new(mf, copper())) as Box<dyn Brdf>,
-            ),
-            ("cui", Box::new(Cui::new(mf, copper()))),
-        ] {
-            let mut rng = rng_stream(1, 0);
-            let n = 50_000;
-            let t = std::time::Instant::now();
-            let mut acc = 0.0;
-            for _ in 0..n {
-                acc += m.eval(wi, wo, &mut rng).multi[0];
-            }
-            eprintln!(
-                "{name}: {:.0} ns per eval at alpha 0.5 (GGX, copper; mean multi {:.4})",
-                t.elapsed().as_nanos() as f64 / n as f64,
-                acc / n as f64
-            );
-        }
-    }
 }

@@ -790,46 +790,4 @@ mod tests {
             9,
         );
     }
-
-    /// Variance of the two-walk combinations for orders >= 2 (run with `--ignored
-    /// --nocapture`): the balance heuristic against the paper's `D(wm_1) / (D(wm_1) +
-    /// D(wm_k))` (same two walks, same cost) and the forward walk alone (half the cost).
-    #[test]
-    #[ignore]
-    fn diagnostic_weighting_variance() {
-        for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
-            for (alpha, ti, to) in [
-                (0.3, 30.0, 60.0),
-                (0.6, 0.0, 45.0),
-                (1.0, 70.0, 20.0),
-                (1.5, 80.0, 80.0),
-                (1.0, 10.0, 85.0),
-            ] {
-                let m = heitz(ndf, alpha, alpha, COPPER);
-                let (wi, wo) = (unit(ti, 0.0), unit(to, 150.0));
-                let n = 100_000;
-                let run = |w: Weighting, both: bool, seed| {
-                    mean_of(n, seed, |rng| {
-                        let f = m.nee_walk(wi, wo, rng, 2, u32::MAX, w);
-                        if both {
-                            let b = m.nee_walk(wo, wi, rng, 2, u32::MAX, w);
-                            [0, 1, 2].map(|c| f[c] + b[c])
-                        } else {
-                            f
-                        }
-                    })
-                };
-                let fwd = run(Weighting::Alone, false, 1);
-                let bal = run(Weighting::Balance, true, 2);
-                let pap = run(Weighting::Paper, true, 3);
-                let ratio = |e: &Estimate| (e.stderr[0] / bal.stderr[0]).powi(2);
-                eprintln!(
-                    "{ndf:?} alpha {alpha} ti {ti} to {to}: balance {:.5}+-{:.5}, paper {:.5}+-{:.5}, \
-                     forward alone {:.5}+-{:.5}; variance / balance: paper {:.2}, forward {:.2}",
-                    bal.value[0], bal.stderr[0], pap.value[0], pap.stderr[0], fwd.value[0],
-                    fwd.stderr[0], ratio(&pap), ratio(&fwd)
-                );
-            }
-        }
-    }
 }

@@ -638,7 +638,6 @@ mod tests {
     use crate::bsdf::testing::*;
     use crate::material::FresnelSpec;
     use crate::microfacet::Fresnel;
-    use std::time::Instant;
 
     const COPPER: FresnelSpec = FresnelSpec::Conductor {
         eta: [0.2378, 1.0066, 1.2404],
@@ -1497,35 +1496,6 @@ mod tests {
                             "{ndf:?} {height:?} alpha {alpha} theta {theta}: {total}"
                         );
                     }
-                }
-            }
-        }
-    }
-
-    #[test]
-    #[ignore = "timing report, run with --ignored --nocapture"]
-    fn eval_timing() {
-        for ndf in NDFS {
-            for height in HEIGHTS {
-                for estimator in ESTIMATORS {
-                    let m = wang(ndf, 0.5, 0.5, COPPER, height, estimator);
-                    let mut rng = rng_stream(3, 0);
-                    let (wi, wo) = (unit(40.0, 0.0), unit(30.0, 150.0));
-                    let n = 200_000;
-                    let t = Instant::now();
-                    let mut acc = 0.0;
-                    for _ in 0..n {
-                        acc += m.eval(wi, wo, &mut rng).multi[0];
-                    }
-                    let eval_ns = t.elapsed().as_secs_f64() / n as f64 * 1e9;
-                    let t = Instant::now();
-                    for _ in 0..n / 4 {
-                        if let Some(s) = m.sample(wi, [rng.random(), rng.random()], &mut rng) {
-                            acc += s.weight[0];
-                        }
-                    }
-                    let sample_ns = t.elapsed().as_secs_f64() / (n / 4) as f64 * 1e9;
-                    eprintln!("timing | {ndf:?} {height:?} {estimator:?} alpha 0.5 | eval {eval_ns:.0} ns | sample {sample_ns:.0} ns | {acc:.1}");
                 }
             }
         }
