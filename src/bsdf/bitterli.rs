@@ -517,6 +517,10 @@ impl Brdf for Bitterli {
     fn is_stochastic(&self) -> bool {
         true
     }
+
+    fn fallback_stats(&self) -> Option<(u64, u64)> {
+        Some(Bitterli::fallback_stats(self))
+    }
 }
 
 #[cfg(test)]

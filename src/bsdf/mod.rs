@@ -86,6 +86,12 @@ pub trait Brdf: Send + Sync {
     fn is_stochastic(&self) -> bool {
         false
     }
+
+    /// `(paths that took a numerical fallback, paths)` since construction, for models that
+    /// detect numerically unsafe paths (`bitterli`); `None` for the others.
+    fn fallback_stats(&self) -> Option<(u64, u64)> {
+        None
+    }
 }
 
 /// The models the command line accepts (PHYSICS.md "Multi-bounce models").

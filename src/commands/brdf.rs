@@ -78,12 +78,13 @@ pub fn run_brdf(args: &BrdfArgs) -> Result<()> {
     });
     let f = [0, 1, 2].map(|c| single[c] + multi[c]);
     let seconds = start.elapsed().as_secs_f64();
-    let out = json!({
+    let mut out = json!({
         "model": material.model.name(), "ndf": material.ndf.name(), "height": material.height.name(),
         "alpha": material.alpha, "wi": wi.re(), "wo": wo.re(),
         "f": f, "f_cos": f.map(|v| v * wo.z), "f_single": single, "f_multi": multi,
         "stderr": stderr, "samples": n, "seconds": seconds,
     });
+    add_fallback_rate(&mut out, brdf.as_ref());
     print_result(args.json, &out, || {
         format!("f = {:.6e} {:.6e} {:.6e} 1/sr (single {:.6e} {:.6e} {:.6e}, multi {:.6e} {:.6e} {:.6e} +- {:.1e})", f[0], f[1], f[2], single[0], single[1], single[2], multi[0], multi[1], multi[2], stderr.iter().cloned().fold(0.0, f64::max))
     });
@@ -101,11 +102,13 @@ pub fn run_albedo(args: &AlbedoArgs) -> Result<()> {
     }
     let t = args.theta_i.to_radians();
     let wi = Vec3::new(t.sin(), 0.0, t.cos());
-    let est = directional_albedo(material.brdf().as_ref(), wi, args.samples, args.seed);
-    let out = json!({
+    let brdf = material.brdf();
+    let est = directional_albedo(brdf.as_ref(), wi, args.samples, args.seed);
+    let mut out = json!({
         "model": material.model.name(), "ndf": material.ndf.name(), "alpha": material.alpha,
         "theta_i_deg": args.theta_i, "albedo": est.value, "stderr": est.stderr, "samples": est.samples,
     });
+    add_fallback_rate(&mut out, brdf.as_ref());
     print_result(args.json, &out, || {
         format!(
             "albedo = {:.6} {:.6} {:.6} (+- {:.1e}, {} samples)",
@@ -117,6 +120,18 @@ pub fn run_albedo(args: &AlbedoArgs) -> Result<()> {
         )
     });
     Ok(())
+}
+
+/// Report the share of paths that took a numerical fallback, for models that count them.
+fn add_fallback_rate(out: &mut serde_json::Value, brdf: &dyn crate::bsdf::Brdf) {
+    if let Some((fallbacks, paths)) = brdf.fallback_stats() {
+        out["fallback_paths"] = json!(fallbacks);
+        out["fallback_rate"] = json!(if paths > 0 {
+            fallbacks as f64 / paths as f64
+        } else {
+            0.0
+        });
+    }
 }
 
 fn print_result(as_json: bool, value: &serde_json::Value, human: impl FnOnce() -> String) {
