@@ -355,17 +355,62 @@ fn lobe_writes_a_picture_and_an_energy_table_that_adds_up() {
 
 #[test]
 fn stochastic_models_report_errors_and_bitterli_its_fallback_rate() {
-    let v: serde_json::Value = serde_json::from_str(&run_ok(&["albedo", "--model", "bitterli", "--alpha", "1.5", "--theta-i", "0", "--samples", "40000", "--json"])).unwrap();
-    let rate = v["fallback_rate"].as_f64().expect("bitterli reports its fallback rate");
+    let v: serde_json::Value = serde_json::from_str(&run_ok(&[
+        "albedo",
+        "--model",
+        "bitterli",
+        "--alpha",
+        "1.5",
+        "--theta-i",
+        "0",
+        "--samples",
+        "40000",
+        "--json",
+    ]))
+    .unwrap();
+    let rate = v["fallback_rate"]
+        .as_f64()
+        .expect("bitterli reports its fallback rate");
     assert!((0.0..0.05).contains(&rate), "{rate}");
     let albedo = triple(&v["albedo"]);
     let stderr = triple(&v["stderr"]);
-    assert!(stderr[0] > 0.0 && (albedo[0] - 1.0).abs() < 4.0 * stderr[0] + 1e-3, "white furnace {albedo:?} +- {stderr:?}");
-    let single: serde_json::Value = serde_json::from_str(&run_ok(&["albedo", "--model", "single", "--alpha", "1.5", "--theta-i", "0", "--json"])).unwrap();
+    assert!(
+        stderr[0] > 0.0 && (albedo[0] - 1.0).abs() < 4.0 * stderr[0] + 1e-3,
+        "white furnace {albedo:?} +- {stderr:?}"
+    );
+    let single: serde_json::Value = serde_json::from_str(&run_ok(&[
+        "albedo",
+        "--model",
+        "single",
+        "--alpha",
+        "1.5",
+        "--theta-i",
+        "0",
+        "--json",
+    ]))
+    .unwrap();
     assert!(single["fallback_rate"].is_null());
     // brdf of a stochastic model: same seed, same answer; f = f_single + f_multi with an error bar.
-    let args = ["brdf", "--model", "heitz", "--alpha", "0.8", "--wi", "0.5,0,1", "--wo", "-0.2,0.4,1", "--samples", "2000", "--seed", "3", "--json"];
-    let (a, b): (serde_json::Value, serde_json::Value) = (serde_json::from_str(&run_ok(&args)).unwrap(), serde_json::from_str(&run_ok(&args)).unwrap());
+    let args = [
+        "brdf",
+        "--model",
+        "heitz",
+        "--alpha",
+        "0.8",
+        "--wi",
+        "0.5,0,1",
+        "--wo",
+        "-0.2,0.4,1",
+        "--samples",
+        "2000",
+        "--seed",
+        "3",
+        "--json",
+    ];
+    let (a, b): (serde_json::Value, serde_json::Value) = (
+        serde_json::from_str(&run_ok(&args)).unwrap(),
+        serde_json::from_str(&run_ok(&args)).unwrap(),
+    );
     assert_eq!(a["f"], b["f"]);
     assert!(triple(&a["f_multi"])[0] > 0.0 && triple(&a["stderr"])[0] > 0.0);
 }

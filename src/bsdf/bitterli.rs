@@ -809,73 +809,6 @@ pub(crate) mod tests {
         );
     }
 
-    /// The harness's sampler-against-evaluation statistic with the bins pooled so that each
-    /// pooled cell expects at least `min_hits` samples: the harness's own statistic scores a
-    /// bin that expects a fraction of a sample (Beckmann's grazing bins opposite the lobe hold
-    /// ~1e-6 of the energy at alpha 0.5) as a many-sigma miss against a tiny eval variance, so
-    /// it rejects even the analytic `single` there. Returns the chi-square z over pooled cells.
-    fn sampler_matches_eval_pooled(
-        brdf: &dyn Brdf,
-        wi: Vec3<f64>,
-        samples: usize,
-        points_per_bin: usize,
-        seed: u64,
-    ) -> f64 {
-        use std::f64::consts::PI;
-        let (n_cos, n_phi) = (8usize, 16usize);
-        let bins = n_cos * n_phi;
-        let bin_of = |w: Vec3<f64>| {
-            let i = ((w.z * n_cos as f64) as usize).min(n_cos - 1);
-            let j = ((w.y.atan2(w.x).rem_euclid(2.0 * PI) / (2.0 * PI) * n_phi as f64) as usize)
-                .min(n_phi - 1);
-            i * n_phi + j
-        };
-        let mut rng = rng_stream(seed, 2);
-        let (mut hist, mut hist2, mut hits) = (vec![0.0; bins], vec![0.0; bins], vec![0.0; bins]);
-        for _ in 0..samples {
-            if let Some(s) = brdf.sample(wi, [rng.random(), rng.random()], &mut rng) {
-                let b = bin_of(s.wo);
-                hist[b] += s.weight[0];
-                hist2[b] += s.weight[0] * s.weight[0];
-                hits[b] += 1.0;
-            }
-        }
-        let n = samples as f64;
-        let bin_area = 2.0 * PI / bins as f64;
-        let side = (points_per_bin as f64).sqrt().ceil() as usize;
-        // Bins in order of cos theta rows; a cell is closed once it holds enough samples.
-        let (mut chi2, mut cells) = (0.0, 0.0);
-        let (mut s_sum, mut s_var, mut e_sum, mut e_var, mut h) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for b in 0..bins {
-            let mean_s = hist[b] / n;
-            s_sum += mean_s;
-            s_var += (hist2[b] / n - mean_s * mean_s).max(0.0) / n;
-            h += hits[b];
-            let (i, j) = (b / n_phi, b % n_phi);
-            let (mut sum, mut sum2) = (0.0, 0.0);
-            for q in 0..side * side {
-                let (a, c) = ((q / side) as f64, (q % side) as f64);
-                let z = (i as f64 + (a + rng.random::<f64>()) / side as f64) / n_cos as f64;
-                let phi =
-                    2.0 * PI * (j as f64 + (c + rng.random::<f64>()) / side as f64) / n_phi as f64;
-                let r = (1.0 - z * z).max(0.0).sqrt();
-                let wo = Vec3::new(r * phi.cos(), r * phi.sin(), z);
-                let v = brdf.eval(wi, wo, &mut rng).total()[0] * z * bin_area;
-                sum += v;
-                sum2 += v * v;
-            }
-            let m = (side * side) as f64;
-            e_sum += sum / m;
-            e_var += (sum2 / m - (sum / m).powi(2)).max(0.0) / m;
-            if h >= 50.0 || b == bins - 1 {
-                chi2 += (s_sum - e_sum).powi(2) / (s_var + e_var);
-                cells += 1.0;
-                (s_sum, s_var, e_sum, e_var, h) = (0.0, 0.0, 0.0, 0.0, 0.0);
-            }
-        }
-        chi_square_z(chi2, cells)
-    }
-
     #[test]
     fn sampler_matches_eval_both_models() {
         // 400 evaluations per bin tame the heavy tail of cui's unidirectional estimator.
@@ -885,16 +818,8 @@ pub(crate) mod tests {
                 for theta in [35.0, 70.0] {
                     let wi = unit(theta, 10.0);
                     let (b, c) = (Bitterli::new(mf, copper()), Cui::new(mf, copper()));
-                    let (zb, zc) = match ndf {
-                        NdfKind::Ggx => (
-                            sampler_matches_eval(&b, wi, 300_000, 400, 8),
-                            sampler_matches_eval(&c, wi, 300_000, 400, 9),
-                        ),
-                        NdfKind::Beckmann => (
-                            sampler_matches_eval_pooled(&b, wi, 200_000, 400, 8),
-                            sampler_matches_eval_pooled(&c, wi, 200_000, 400, 9),
-                        ),
-                    };
+                    let zb = sampler_matches_eval(&b, wi, 300_000, 400, 8);
+                    let zc = sampler_matches_eval(&c, wi, 300_000, 400, 9);
                     eprintln!(
                         "sampler vs eval {ndf:?} alpha {alpha} theta {theta}: bitterli z = {zb:.2}, \
                          cui z = {zc:.2}"

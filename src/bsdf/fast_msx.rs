@@ -24,8 +24,8 @@
 //! normals of the direct lobe, sec. 4.4; the mixture adds a cosine lobe so the weight of the
 //! broader indirect lobe stays bounded).
 
+use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
-use super::{lobe_mixture, Brdf, BrdfSample, BrdfValue, Rng};
 use crate::scalar::{Real, Rgb, Vec3};
 use std::f64::consts::PI;
 
@@ -77,23 +77,11 @@ impl<T: Real> FastMsx<T> {
     }
 }
 
-impl Brdf for FastMsx<f64> {
-    fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, _rng: &mut Rng) -> BrdfValue {
-        let (single, multi) = self.eval_split(wi, wo);
-        BrdfValue {
-            single: single.0,
-            multi: multi.0,
-        }
+impl AddedLobe for FastMsx<f64> {
+    fn single_lobe(&self) -> &SingleBounce<f64> {
+        &self.single
     }
-
-    fn sample(&self, wi: Vec3<f64>, u: [f64; 2], _rng: &mut Rng) -> Option<BrdfSample> {
-        lobe_mixture::sample(&self.single, wi, u, |wo| {
-            let (s, m) = self.eval_split(wi, wo);
-            (s + m).0
-        })
-    }
-
-    fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
-        lobe_mixture::pdf(&self.single, wi, wo)
+    fn added_lobe(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> [f64; 3] {
+        self.indirect(wi, wo).0
     }
 }

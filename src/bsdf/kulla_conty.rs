@@ -14,8 +14,8 @@
 //! Sampling: [`super::lobe_mixture`].
 
 use super::albedo_table::AlbedoTable;
+use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
-use super::{lobe_mixture, Brdf, BrdfSample, BrdfValue, Rng};
 use crate::scalar::{Real, Rgb, Vec3};
 
 /// 8-point Gauss-Legendre nodes and weights on [0, 1] (for `F_avg`).
@@ -75,21 +75,11 @@ impl<T: Real> KullaConty<T> {
     }
 }
 
-impl Brdf for KullaConty<f64> {
-    fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, _rng: &mut Rng) -> BrdfValue {
-        BrdfValue {
-            single: self.single.eval(wi, wo).0,
-            multi: self.compensation(wi, wo).0,
-        }
+impl AddedLobe for KullaConty<f64> {
+    fn single_lobe(&self) -> &SingleBounce<f64> {
+        &self.single
     }
-
-    fn sample(&self, wi: Vec3<f64>, u: [f64; 2], _rng: &mut Rng) -> Option<BrdfSample> {
-        lobe_mixture::sample(&self.single, wi, u, |wo| {
-            (self.single.eval(wi, wo) + self.compensation(wi, wo)).0
-        })
-    }
-
-    fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
-        lobe_mixture::pdf(&self.single, wi, wo)
+    fn added_lobe(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> [f64; 3] {
+        self.compensation(wi, wo).0
     }
 }

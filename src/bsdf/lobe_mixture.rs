@@ -8,7 +8,7 @@
 //! `u` carries over to the chosen technique.
 
 use super::single::SingleBounce;
-use super::BrdfSample;
+use super::{Brdf, BrdfSample, BrdfValue, Rng};
 use crate::scalar::Vec3;
 use std::f64::consts::{FRAC_1_PI, PI};
 
@@ -53,4 +53,33 @@ pub fn sample(
         pdf: density,
         bounces: 0,
     })
+}
+
+/// A model whose value is the single-bounce lobe plus an added deterministic lobe
+/// (`fast-msx`, `kulla-conty`, `turquin`): evaluation, sampling and density follow for free.
+pub trait AddedLobe: Send + Sync {
+    /// The exact single-bounce part.
+    fn single_lobe(&self) -> &SingleBounce<f64>;
+    /// The added lobe, 1/sr.
+    fn added_lobe(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> [f64; 3];
+}
+
+impl<M: AddedLobe> Brdf for M {
+    fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, _rng: &mut Rng) -> BrdfValue {
+        BrdfValue {
+            single: self.single_lobe().eval(wi, wo).0,
+            multi: self.added_lobe(wi, wo),
+        }
+    }
+
+    fn sample(&self, wi: Vec3<f64>, u: [f64; 2], _rng: &mut Rng) -> Option<BrdfSample> {
+        sample(self.single_lobe(), wi, u, |wo| {
+            let (s, m) = (self.single_lobe().eval(wi, wo).0, self.added_lobe(wi, wo));
+            [s[0] + m[0], s[1] + m[1], s[2] + m[2]]
+        })
+    }
+
+    fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
+        pdf(self.single_lobe(), wi, wo)
+    }
 }

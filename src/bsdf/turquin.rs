@@ -14,8 +14,8 @@
 //! [`super::lobe_mixture`].
 
 use super::albedo_table::AlbedoTable;
+use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
-use super::{lobe_mixture, Brdf, BrdfSample, BrdfValue, Rng};
 use crate::scalar::{Real, Rgb, Vec3};
 
 #[derive(Clone, Copy)]
@@ -49,23 +49,11 @@ impl<T: Real> Turquin<T> {
     }
 }
 
-impl Brdf for Turquin<f64> {
-    fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, _rng: &mut Rng) -> BrdfValue {
-        let (single, multi) = self.eval_split(wi, wo);
-        BrdfValue {
-            single: single.0,
-            multi: multi.0,
-        }
+impl AddedLobe for Turquin<f64> {
+    fn single_lobe(&self) -> &SingleBounce<f64> {
+        &self.single
     }
-
-    fn sample(&self, wi: Vec3<f64>, u: [f64; 2], _rng: &mut Rng) -> Option<BrdfSample> {
-        lobe_mixture::sample(&self.single, wi, u, |wo| {
-            let (s, m) = self.eval_split(wi, wo);
-            (s + m).0
-        })
-    }
-
-    fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
-        lobe_mixture::pdf(&self.single, wi, wo)
+    fn added_lobe(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> [f64; 3] {
+        self.eval_split(wi, wo).1 .0
     }
 }
