@@ -42,7 +42,9 @@
 //! is unbiased conditional on the directions, so the fallback costs variance, never bias.
 //! [`Bitterli::fallback_stats`] counts the walks that fell back.
 
-use super::position_free::{connect, mis_pdf, scatter, signed_lambda, survival, MAX_WALK_BOUNCES};
+use super::position_free::{
+    connect, mis_pdf, scatter, signed_lambda, survival, walk_sample, MAX_WALK_BOUNCES,
+};
 use super::single::SingleBounce;
 use super::{Brdf, BrdfSample, BrdfValue, Rng};
 use crate::microfacet::{Fresnel, Height, Microfacet};
@@ -498,16 +500,7 @@ impl Brdf for Bitterli {
         }
         let (path, fell_back) = self.sample_walk(wi, u, rng);
         self.count(1, fell_back as u64);
-        let (wo, weight, bounces) = path?;
-        if wo.z <= 0.0 || !weight.iter().all(|w| w.is_finite()) {
-            return None;
-        }
-        Some(BrdfSample {
-            wo,
-            weight,
-            pdf: mis_pdf(&self.white, wi, wo),
-            bounces,
-        })
+        walk_sample(&self.white, wi, path)
     }
 
     fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
@@ -892,37 +885,11 @@ pub(crate) mod tests {
     fn survives_the_finite_sweep() {
         assert_finite_sweep(
             |rng| {
-                let (mf, fresnel) = sweep_configuration(rng);
-                Box::new(Bitterli::new(mf, fresnel))
+                let (mf, fresnel) = random_surface(rng);
+                Box::new(Bitterli::new(mf, fresnel.to_fresnel()))
             },
             1_000_000,
             12,
         );
-    }
-
-    /// Roughness log-uniform in 1e-4..3, anisotropy up to 100, GGX or Beckmann, conductor
-    /// eta 0.01..10, k 0..20 per channel.
-    pub(crate) fn sweep_configuration(rng: &mut Rng) -> (Microfacet<f64>, Fresnel<f64>) {
-        let a = 10f64.powf(rng.random_range(-4.0..0.48));
-        let ndf = if rng.random::<bool>() {
-            NdfKind::Ggx
-        } else {
-            NdfKind::Beckmann
-        };
-        let ratio = 10f64.powf(rng.random_range(-2.0..0.0));
-        let (ax, ay) = if rng.random::<bool>() {
-            (a, a * ratio)
-        } else {
-            (a * ratio, a)
-        };
-        let eta = [0; 3].map(|_| rng.random_range(0.01..10.0));
-        let k = [0; 3].map(|_| rng.random_range(0.0..20.0));
-        (
-            Microfacet::new(ndf, ax, ay),
-            Fresnel::Conductor {
-                eta: crate::scalar::Rgb(eta),
-                k: crate::scalar::Rgb(k),
-            },
-        )
     }
 }

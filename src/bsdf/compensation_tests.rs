@@ -12,7 +12,6 @@ use crate::material::FresnelSpec;
 use crate::microfacet::{Height, Microfacet, NdfKind};
 use crate::scalar::{Rgb, Vec3};
 use num_dual::Dual64;
-use rand::Rng as _;
 use std::f64::consts::PI;
 
 const COPPER: FresnelSpec = FresnelSpec::Conductor {
@@ -144,18 +143,9 @@ fn compensation_models_survive_the_finite_sweep() {
     for which in 0..3 {
         assert_finite_sweep(
             |rng| {
-                let a = 10f64.powf(rng.random_range(-4.0..0.48));
-                let ndf = if rng.random::<bool>() {
-                    NdfKind::Ggx
-                } else {
-                    NdfKind::Beckmann
-                };
-                let fresnel = FresnelSpec::Conductor {
-                    eta: [rng.random_range(0.01..10.0); 3],
-                    k: [rng.random_range(0.0..20.0); 3],
-                };
+                let (microfacet, fresnel) = random_surface(rng);
                 let s = SingleBounce {
-                    microfacet: Microfacet::new(ndf, a, a * rng.random_range(0.01..1.0)),
+                    microfacet,
                     fresnel: fresnel.to_fresnel(),
                     height: Height::Correlated,
                 };

@@ -45,7 +45,9 @@
 //! - Alg. 2 and 3 stop at `maxBounce` (biased); here Russian roulette from the remaining
 //!   energy ends the walk of `eval` (as in `bitterli`) and `sample` walks until it exits.
 
-use super::position_free::{connect, mis_pdf, scatter, signed_lambda, survival, MAX_WALK_BOUNCES};
+use super::position_free::{
+    connect, mis_pdf, scatter, signed_lambda, survival, walk_sample, MAX_WALK_BOUNCES,
+};
 use super::single::SingleBounce;
 use super::{Brdf, BrdfSample, BrdfValue, Rng};
 use crate::microfacet::{Fresnel, Height, Microfacet};
@@ -269,16 +271,7 @@ impl Brdf for Cui {
         if wi.z <= 0.0 {
             return None;
         }
-        let (wo, weight, bounces) = self.sample_walk(wi, u, rng)?;
-        if wo.z <= 0.0 || !weight.iter().all(|x| x.is_finite()) {
-            return None;
-        }
-        Some(BrdfSample {
-            wo,
-            weight,
-            pdf: mis_pdf(&self.white, wi, wo),
-            bounces,
-        })
+        walk_sample(&self.white, wi, self.sample_walk(wi, u, rng))
     }
 
     fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
@@ -358,8 +351,8 @@ mod tests {
     fn survives_the_finite_sweep() {
         assert_finite_sweep(
             |rng| {
-                let (mf, fresnel) = crate::bsdf::bitterli::tests::sweep_configuration(rng);
-                Box::new(Cui::new(mf, fresnel))
+                let (mf, fresnel) = crate::bsdf::testing::random_surface(rng);
+                Box::new(Cui::new(mf, fresnel.to_fresnel()))
             },
             1_000_000,
             13,

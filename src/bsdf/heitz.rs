@@ -774,17 +774,8 @@ mod tests {
     fn heitz_survives_the_finite_sweep() {
         assert_finite_sweep(
             |rng| {
-                let a = 10f64.powf(rng.random_range(-4.0..0.48));
-                let ndf = if rng.random::<bool>() {
-                    NdfKind::Ggx
-                } else {
-                    NdfKind::Beckmann
-                };
-                let fresnel = FresnelSpec::Conductor {
-                    eta: [rng.random_range(0.01..10.0); 3],
-                    k: [rng.random_range(0.0..20.0); 3],
-                };
-                Box::new(heitz(ndf, a, a * rng.random_range(0.01..1.0), fresnel))
+                let (mf, fresnel) = random_surface(rng);
+                Box::new(Heitz::new(mf, fresnel.to_fresnel()))
             },
             1_000_000,
             9,

@@ -15,6 +15,7 @@
 //! `A(w)` is [`Microfacet::projected_area`]; `A(-d) = |d.z| |Lambda(d)|` for every `d`.
 
 use super::single::SingleBounce;
+use super::BrdfSample;
 use crate::microfacet::{Fresnel, Microfacet};
 use crate::scalar::Vec3;
 use std::f64::consts::FRAC_1_PI;
@@ -133,6 +134,25 @@ pub(crate) fn mis_pdf(white_single: &SingleBounce<f64>, wi: Vec3<f64>, wo: Vec3<
     } else {
         0.0
     }
+}
+
+/// The sample of a walk that left along `wo` with `weight` after `bounces` reflections, with the
+/// MIS density of [`mis_pdf`]; `None` when it left below the horizon or with a non-finite weight.
+pub(crate) fn walk_sample(
+    white_single: &SingleBounce<f64>,
+    wi: Vec3<f64>,
+    path: Option<(Vec3<f64>, [f64; 3], u32)>,
+) -> Option<BrdfSample> {
+    let (wo, weight, bounces) = path?;
+    if wo.z <= 0.0 || !weight.iter().all(|w| w.is_finite()) {
+        return None;
+    }
+    Some(BrdfSample {
+        wo,
+        weight,
+        pdf: mis_pdf(white_single, wi, wo),
+        bounces,
+    })
 }
 
 #[cfg(test)]

@@ -9,6 +9,8 @@
 use super::single::SingleBounce;
 use super::{Brdf, Rng};
 use crate::albedo::{directional_albedo, rng_stream, Estimate};
+use crate::material::FresnelSpec;
+use crate::microfacet::{Microfacet, NdfKind};
 use crate::scalar::Vec3;
 use rand::Rng as _;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -266,6 +268,30 @@ pub fn assert_finite_sweep(
             }
         }
     }
+}
+
+/// A random surface for the finite sweeps (the ranges the issues name): roughness log-uniform in
+/// [1e-4, 3], anisotropy ratio log-uniform in [1, 100] along x or y, GGX or Beckmann, conductor
+/// eta in [0.01, 10] and k in [0, 20] drawn per channel.
+pub fn random_surface(rng: &mut Rng) -> (Microfacet<f64>, FresnelSpec) {
+    let a = 10f64.powf(rng.random_range(-4.0..0.48));
+    let ndf = if rng.random::<bool>() {
+        NdfKind::Ggx
+    } else {
+        NdfKind::Beckmann
+    };
+    let ratio = 10f64.powf(rng.random_range(-2.0..0.0));
+    let (ax, ay) = if rng.random::<bool>() {
+        (a, a * ratio)
+    } else {
+        (a * ratio, a)
+    };
+    let eta = [0; 3].map(|_| rng.random_range(0.01..10.0));
+    let k = [0; 3].map(|_| rng.random_range(0.0..20.0));
+    (
+        Microfacet::new(ndf, ax, ay),
+        FresnelSpec::Conductor { eta, k },
+    )
 }
 
 /// `n` random configurations `(alpha, wi, wo)` for agreement and reciprocity tests.

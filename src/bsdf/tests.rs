@@ -294,26 +294,15 @@ fn harness_agrees_on_single_and_rejects_a_mismatch() {
 
 #[test]
 fn single_survives_the_finite_sweep() {
-    use super::testing::assert_finite_sweep;
+    use super::testing::{assert_finite_sweep, random_surface};
     assert_finite_sweep(
         |rng| {
-            let a = 10f64.powf(rng.random_range(-4.0..0.48));
-            let ndf = if rng.random::<bool>() {
-                NdfKind::Ggx
-            } else {
-                NdfKind::Beckmann
-            };
-            let fresnel = FresnelSpec::Conductor {
-                eta: [rng.random_range(0.01..10.0); 3],
-                k: [rng.random_range(0.0..20.0); 3],
-            };
-            Box::new(single(
-                ndf,
-                a,
-                a * rng.random_range(0.01..1.0),
-                fresnel,
-                Height::Correlated,
-            ))
+            let (microfacet, fresnel) = random_surface(rng);
+            Box::new(SingleBounce {
+                microfacet,
+                fresnel: fresnel.to_fresnel(),
+                height: Height::Correlated,
+            })
         },
         1_000_000,
         9,

@@ -1387,15 +1387,14 @@ mod tests {
     fn finite_sweep(estimator: WangEstimator) {
         assert_finite_sweep(
             |rng| {
-                let a = 10f64.powf(rng.random_range(-4.0..0.48));
-                let fresnel = FresnelSpec::Conductor {
-                    eta: [rng.random_range(0.01..10.0); 3],
-                    k: [rng.random_range(0.0..20.0); 3],
-                };
-                let ndf = NDFS[usize::from(rng.random::<bool>())];
+                let (microfacet, fresnel) = random_surface(rng);
                 let height = HEIGHTS[usize::from(rng.random::<bool>())];
-                let ay = a * rng.random_range(0.01..1.0);
-                Box::new(wang(ndf, a, ay, fresnel, height, estimator))
+                let surface = SingleBounce {
+                    microfacet,
+                    fresnel: fresnel.to_fresnel(),
+                    height,
+                };
+                Box::new(Wang::new(surface, estimator))
             },
             1_000_000,
             9,
