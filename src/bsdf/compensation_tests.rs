@@ -14,11 +14,6 @@ use crate::scalar::{Rgb, Vec3};
 use num_dual::Dual64;
 use std::f64::consts::PI;
 
-const COPPER: FresnelSpec = FresnelSpec::Conductor {
-    eta: [0.2378, 1.0066, 1.2404],
-    k: [3.6264, 2.5823, 2.3929],
-};
-
 fn single(ndf: NdfKind, a: f64, fresnel: FresnelSpec, height: Height) -> SingleBounce<f64> {
     SingleBounce {
         microfacet: Microfacet::new(ndf, a, a),

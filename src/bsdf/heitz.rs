@@ -430,11 +430,6 @@ mod tests {
     use crate::microfacet::NdfKind;
     use rayon::prelude::*;
 
-    const COPPER: FresnelSpec = FresnelSpec::Conductor {
-        eta: [0.2378, 1.0066, 1.2404],
-        k: [3.6264, 2.5823, 2.3929],
-    };
-
     fn heitz(ndf: NdfKind, ax: f64, ay: f64, fresnel: FresnelSpec) -> Heitz {
         Heitz::new(Microfacet::new(ndf, ax, ay), fresnel.to_fresnel())
     }

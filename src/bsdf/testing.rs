@@ -15,6 +15,13 @@ use crate::scalar::Vec3;
 use rand::Rng as _;
 use std::f64::consts::{FRAC_1_PI, PI};
 
+/// Measured copper (Johnson & Christy 1972 at 650, 550, 450 nm, from `shared/data/conductors_nk.json`),
+/// the conductor of the agreement and reciprocity tests.
+pub const COPPER: FresnelSpec = FresnelSpec::Conductor {
+    eta: [0.2378, 1.0066, 1.2404],
+    k: [3.6264, 2.5823, 2.3929],
+};
+
 /// Unit direction from polar angles in degrees.
 pub fn unit(theta_deg: f64, phi_deg: f64) -> Vec3<f64> {
     let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());

@@ -3,6 +3,7 @@
 #![allow(clippy::needless_range_loop)] // channel loops over several parallel arrays read best indexed
 
 use super::single::SingleBounce;
+use super::testing::COPPER;
 use super::*;
 use crate::albedo::{directional_albedo, rng_stream};
 use crate::material::FresnelSpec;
@@ -29,11 +30,6 @@ fn single(
         height,
     }
 }
-
-const COPPER: FresnelSpec = FresnelSpec::Conductor {
-    eta: [0.27, 0.68, 1.22],
-    k: [3.61, 2.63, 2.29],
-};
 
 #[test]
 fn single_is_reciprocal() {

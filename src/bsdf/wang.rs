@@ -639,10 +639,6 @@ mod tests {
     use crate::material::FresnelSpec;
     use crate::microfacet::Fresnel;
 
-    const COPPER: FresnelSpec = FresnelSpec::Conductor {
-        eta: [0.2378, 1.0066, 1.2404],
-        k: [3.6264, 2.5823, 2.3929],
-    };
     const HEIGHTS: [Height; 2] = [Height::Uncorrelated, Height::Correlated];
     const NDFS: [NdfKind; 2] = [NdfKind::Ggx, NdfKind::Beckmann];
     const ESTIMATORS: [WangEstimator; 2] =
