@@ -12,6 +12,8 @@
 //! (pixel coordinates as in `capture::camera`). The radiance model is PHYSICS.md "Conventions"
 //! (radiance of a pixel).
 
+mod pyramid;
+
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -179,7 +181,7 @@ impl ShadingRecords {
         self.weight.try_reserve_exact(pixels).map_err(too_large)
     }
 
-    /// Appends the sub-sample geometry of one photo, and its pixels with weight 1 where some
+    /// Appends the sub-sample geometry of one photo, and its pixels with the photo's weight where some
     /// sub-sample sees the sample and 0 (counted as outside) elsewhere.
     fn add_geometry(&mut self, capture: &Capture, photo: &Photo, span: &PhotoSpan, grid: usize) {
         let spp = grid * grid;
@@ -212,7 +214,7 @@ impl ShadingRecords {
                             seen = true;
                         }
                     }
-                    *pixel_weight = if seen { 1.0 } else { 0.0 };
+                    *pixel_weight = if seen { photo.weight } else { 0.0 };
                 }
             });
         self.excluded.outside_sample += self.weight[pixels].iter().filter(|&&w| w == 0.0).count();
@@ -301,6 +303,7 @@ mod tests {
             camera,
             light,
             exposure: 1.0,
+            weight: 1.0,
             mask: None,
             saturated_mask: None,
             color: ColorEncoding::default_for(Path::new(image)),

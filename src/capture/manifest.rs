@@ -376,6 +376,7 @@ fn read_photo(
     let image = t.required("image", non_empty_path)?;
     let light = read_light(t.required_sub_table("light")?, warnings)?;
     let exposure = t.optional("exposure", checks::positive)?.unwrap_or(1.0);
+    let weight = t.optional("weight", checks::positive)?.unwrap_or(1.0);
     let mask = t.optional("mask", non_empty_path)?;
     let saturated_mask = t.optional("saturated_mask", non_empty_path)?;
     let color = t
@@ -395,6 +396,7 @@ fn read_photo(
         camera,
         light,
         exposure,
+        weight,
         mask,
         saturated_mask,
         color,
@@ -486,6 +488,8 @@ struct ManifestOut<'a> {
 struct PhotoOut<'a> {
     image: String,
     exposure: f64,
+    #[serde(skip_serializing_if = "is_one")]
+    weight: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
     mask: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -495,6 +499,10 @@ struct PhotoOut<'a> {
     light: &'a Light,
     #[serde(skip_serializing_if = "Option::is_none")]
     camera: Option<&'a Camera>,
+}
+
+fn is_one(value: &f64) -> bool {
+    *value == 1.0
 }
 
 /// Writes `capture` as a manifest at `path` (see [`Capture::save_manifest`]).
@@ -534,6 +542,7 @@ pub(super) fn write(capture: &Capture, path: &Path) -> Result<()> {
             Ok(PhotoOut {
                 image: path_text(&p.image, format!("photo[{i}].image"))?,
                 exposure: p.exposure,
+                weight: p.weight,
                 mask: optional_path(&p.mask, "mask")?,
                 saturated_mask: optional_path(&p.saturated_mask, "saturated_mask")?,
                 color: (p.color != default_color).then_some(p.color),
@@ -864,6 +873,11 @@ camera = { model = "rectified", resolution = [32, 16] }
                 "photo[0].exposure: must be finite and positive",
             ),
             (
+                "exposure = 1.0",
+                "exposure = 1.0\nweight = -0.5",
+                "photo[0].weight: must be finite and positive",
+            ),
+            (
                 "[1000.0, 1000.0, 1000.0]",
                 "[1000.0, -1.0, 1000.0]",
                 "photo[0].light.intensity: must be finite and non-negative",
@@ -950,6 +964,7 @@ camera = { model = "rectified", resolution = [32, 16] }
 [[photo]]
 image = "sub/001.png"
 exposure = 0.3333333333333333
+weight = 0.25
 mask = "sub/001_mask.png"
 saturated_mask = "sub/001_sat.png"
 color = "srgb"

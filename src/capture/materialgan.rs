@@ -84,6 +84,7 @@ pub fn import(folder: &Path, image_folder: Option<&str>) -> Result<Capture> {
                 }),
                 light,
                 exposure: 1.0,
+                weight: 1.0,
                 mask: None,
                 saturated_mask: folder
                     .join(&saturated_mask)

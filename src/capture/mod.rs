@@ -56,6 +56,9 @@ pub struct Photo {
     pub light: Light,
     /// Gain that multiplies the prediction (PHYSICS.md "Conventions"); default 1.
     pub exposure: f64,
+    /// Relative weight of this photo's pixels in the loss (manifest `weight`, default 1): lower
+    /// it for a photo known to be noisier or less trusted.
+    pub weight: f64,
     /// Optional keep-mask (zero pixels are ignored), relative to [`Capture::root`].
     pub mask: Option<PathBuf>,
     /// Optional saturation mask (nonzero pixels are saturated and ignored), relative to

@@ -7,7 +7,7 @@
 //! function of the coordinates and differences and line searches see a smooth surface.
 
 use super::params::ParamSpace;
-use crate::loss::{Loss, LossKind};
+use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::render_pixels;
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
@@ -25,6 +25,7 @@ pub struct Objective<'a> {
     pixels: Vec<usize>,
     target: Vec<[f64; 3]>,
     weight: Vec<f64>,
+    layout: ImageLayout,
     kind: LossKind,
     seed: u64,
     /// The loss is divided by this, so optimiser tolerances are relative (L2: mean target^2).
@@ -52,14 +53,16 @@ impl<'a> Objective<'a> {
                     / wsum)
                     .max(1e-300)
             }
-            LossKind::LogL1 => 1.0,
+            LossKind::RelativeL2 | LossKind::LogL1 | LossKind::Ssim => 1.0,
         };
+        let layout = ImageLayout::new(records, &pixels);
         Objective {
             space,
             records,
             pixels,
             target,
             weight,
+            layout,
             kind,
             seed,
             scale,
@@ -82,30 +85,31 @@ impl<'a> Objective<'a> {
         )
     }
 
+    /// The loss bound to this objective's pixels.
+    pub fn image_loss(&self) -> Loss<'_> {
+        Loss::new(self.kind, &self.target, &self.weight, &self.layout)
+    }
+
     /// The loss (not normalised) at `x`.
     pub fn loss(&self, x: &[f64]) -> f64 {
-        Loss::new(self.kind, &self.target, &self.weight).value(&self.predict(x))
+        self.image_loss().value(&self.predict(x))
     }
 
     /// Loss per photo at `x`: (photo index, loss, pixel count).
     pub fn loss_per_photo(&self, x: &[f64]) -> Vec<(usize, f64, usize)> {
-        let predicted = self.predict(x);
-        let loss = Loss::new(self.kind, &self.target, &self.weight);
-        self.records
-            .photos
-            .iter()
+        let terms = self.image_loss().terms(&self.predict(x));
+        let mut per_photo = vec![(0.0, 0.0, 0); self.records.photos.len()];
+        for (k, &(photo, _)) in self.layout.place.iter().enumerate() {
+            let entry = &mut per_photo[photo];
+            entry.0 += terms[k];
+            entry.1 += self.weight[k];
+            entry.2 += 1;
+        }
+        per_photo
+            .into_iter()
             .enumerate()
-            .map(|(i, photo)| {
-                let range = photo.first_pixel..photo.first_pixel + photo.width * photo.height;
-                let (mut sum, mut wsum, mut count) = (0.0, 0.0, 0);
-                for (k, &p) in self.pixels.iter().enumerate() {
-                    if range.contains(&p) {
-                        sum += self.weight[k] * loss.pixel(predicted[k], k);
-                        wsum += self.weight[k];
-                        count += 1;
-                    }
-                }
-                (i, sum / (3.0 * wsum.max(f64::MIN_POSITIVE)), count)
+            .map(|(i, (sum, wsum, count))| {
+                (i, sum / (3.0 * f64::max(wsum, f64::MIN_POSITIVE)), count)
             })
             .collect()
     }
