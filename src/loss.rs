@@ -159,6 +159,20 @@ impl<'a> Loss<'a> {
         self.terms(predicted).iter().sum::<f64>() / (3.0 * self.wsum)
     }
 
+    /// For the losses that are weighted squared errors (`l2`, `relative-l2`): the weights `v`
+    /// with `value = sum_pixels sum_c v_c (p_c - t_c)^2`, normalisation included. `None` for the
+    /// others. Variable projection ([`crate::fit::projection`]) solves these in closed form.
+    pub fn quadratic_weights(&self) -> Option<Vec<[f64; 3]>> {
+        let norm = 1.0 / (3.0 * self.wsum);
+        match self.kind {
+            // A term v (p - t)^2 has slope 2 v at p = t + 1.
+            LossKind::L2 | LossKind::RelativeL2 => Some(self.per_pixel(self.target, |_, t, w| {
+                [0, 1, 2].map(|c| w * norm * self.pixel_term(t[c] + 1.0, t[c]).1 / 2.0)
+            })),
+            LossKind::LogL1 | LossKind::Ssim => None,
+        }
+    }
+
     /// `d value / d predicted` per pixel and channel.
     pub fn gradient(&self, predicted: &[[f64; 3]]) -> Vec<[f64; 3]> {
         let norm = 1.0 / (3.0 * self.wsum);
@@ -271,6 +285,32 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn quadratic_weights_reproduce_the_squared_error_losses() {
+        let target = smooth_images();
+        let weight: Vec<f64> = (0..target.len()).map(|i| (i % 3) as f64 * 0.5).collect();
+        let layout = layout();
+        let predicted: Vec<[f64; 3]> = target.iter().map(|t| t.map(|v| 1.3 * v - 0.1)).collect();
+        for kind in [LossKind::L2, LossKind::RelativeL2] {
+            let loss = Loss::new(kind, &target, &weight, &layout);
+            let v = loss.quadratic_weights().unwrap();
+            let sum: f64 = (0..target.len())
+                .flat_map(|k| (0..3).map(move |c| (k, c)))
+                .map(|(k, c)| v[k][c] * (predicted[k][c] - target[k][c]).powi(2))
+                .sum();
+            let value = loss.value(&predicted);
+            assert!(
+                (sum - value).abs() < 1e-12 * value,
+                "{kind:?}: {sum} vs {value}"
+            );
+        }
+        for kind in [LossKind::LogL1, LossKind::Ssim] {
+            assert!(Loss::new(kind, &target, &weight, &layout)
+                .quadratic_weights()
+                .is_none());
         }
     }
 

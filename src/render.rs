@@ -57,6 +57,24 @@ pub fn render_pixels(
     out
 }
 
+/// Radiance of the pixels listed in `pixels` for a white Lambertian surface (albedo 1, `f = 1/pi`):
+/// the basis of the diffuse term, which is linear in the albedo.
+pub fn lambertian_pixels(records: &ShadingRecords, pixels: &[usize]) -> Vec<[f64; 3]> {
+    let spp = records.samples_per_pixel;
+    pixels
+        .iter()
+        .map(|&p| {
+            let mut sum = [0.0; 3];
+            for e in &records.irradiance[p * spp..(p + 1) * spp] {
+                for c in 0..3 {
+                    sum[c] += e[c] * FRAC_1_PI;
+                }
+            }
+            sum.map(|v| v / spp as f64)
+        })
+        .collect()
+}
+
 /// Predicted radiance of every pixel of every photo.
 pub fn render_all(material: &Material, records: &ShadingRecords, seed: u64) -> Vec<[f64; 3]> {
     let all: Vec<usize> = (0..records.pixel_count()).collect();

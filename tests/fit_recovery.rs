@@ -13,17 +13,7 @@ struct Recovered {
 }
 
 fn fit(set: &Path, extra: &[&str], out: &Path) -> Recovered {
-    let fit_path = out.join("fit.json");
-    let mut args = vec![
-        "fit",
-        set.to_str().unwrap(),
-        "-o",
-        fit_path.to_str().unwrap(),
-        "--quiet",
-    ];
-    args.extend_from_slice(extra);
-    run_ok(&args);
-    let fit = read_json(&fit_path);
+    let fit = fit_json(set, extra, out);
     Recovered {
         alpha: [
             fit["alpha"][0].as_f64().unwrap(),

@@ -22,8 +22,19 @@ pub struct FitArgs {
     /// Models to fit, comma-separated; the fit file reports the one with the lowest loss.
     #[arg(long, value_delimiter = ',', default_value = "single")]
     pub models: Vec<Model>,
-    #[arg(long, value_enum, default_value = "lbfgs")]
+    /// auto: L-BFGS, or Nelder-Mead for heitz; pso: particle swarm start, then L-BFGS.
+    #[arg(long, value_enum, default_value = "auto")]
     pub optimizer: Optimizer,
+    /// Local searches from this many starts: the global start plus seeded random ones.
+    #[arg(long, default_value_t = 1, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=64))]
+    pub starts: usize,
+    /// Start with a joint scan instead of variable projection (which solves Schlick F0 and the
+    /// diffuse albedo in closed form at each roughness, for l2 and relative-l2 losses).
+    #[arg(long)]
+    pub no_projection: bool,
+    /// Coarse-to-fine levels: 1 fits at full resolution only, n starts at 1/2^(n-1).
+    #[arg(long, default_value_t = 1, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=6))]
+    pub pyramid: usize,
     /// Fresnel family to fit.
     #[arg(long, value_enum, default_value = "schlick")]
     pub fresnel: FresnelFamily,
@@ -120,6 +131,9 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
             max_iters: args.max_iters,
             seed: args.seed,
             progress: !args.quiet,
+            starts: args.starts,
+            projection: !args.no_projection,
+            pyramid: args.pyramid,
         };
         let fit = fit_model(&records, &options)?;
         if !args.quiet {

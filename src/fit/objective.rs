@@ -12,7 +12,7 @@ use crate::render::render_pixels;
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// Relative step of the central differences (in unbounded coordinates): truncation error
 /// ~h^2 = 1e-10, rounding error ~eps/h = 1e-11 relative to the cost.
@@ -30,7 +30,7 @@ pub struct Objective<'a> {
     seed: u64,
     /// The loss is divided by this, so optimiser tolerances are relative (L2: mean target^2).
     scale: f64,
-    pub evaluations: AtomicUsize,
+    pub evaluations: Arc<AtomicUsize>,
     /// Lowest cost seen so far and its coordinates: what an interrupted run still reports.
     pub best: Mutex<(f64, Vec<f64>)>,
 }
@@ -66,13 +66,33 @@ impl<'a> Objective<'a> {
             kind,
             seed,
             scale,
-            evaluations: AtomicUsize::new(0),
+            evaluations: Arc::new(AtomicUsize::new(0)),
             best: Mutex::new((f64::INFINITY, Vec::new())),
         }
     }
 
     pub fn pixel_count(&self) -> usize {
         self.pixels.len()
+    }
+
+    /// The records this objective compares against.
+    pub fn records(&self) -> &'a ShadingRecords {
+        self.records
+    }
+
+    /// Indices of the record pixels that enter the loss.
+    pub fn pixels(&self) -> &[usize] {
+        &self.pixels
+    }
+
+    /// Seed of the common random numbers.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// Targets of the loss pixels.
+    pub fn targets(&self) -> &[[f64; 3]] {
+        &self.target
     }
 
     /// Predicted radiance of the loss pixels at coordinates `x`.

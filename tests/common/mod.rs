@@ -58,3 +58,19 @@ pub fn material_f0(material: &serde_json::Value) -> [f64; 3] {
         other => panic!("no F0 for {other}"),
     }
 }
+
+/// `bouncefit fit SET -o OUT/fit.json --quiet EXTRA...`; returns the fit file.
+pub fn fit_json(set: &Path, extra: &[&str], out: &Path) -> serde_json::Value {
+    let fit_path = out.join("fit.json");
+    let mut args = vec![
+        "fit",
+        set.to_str().unwrap(),
+        "-o",
+        fit_path.to_str().unwrap(),
+        "--quiet",
+        "--force",
+    ];
+    args.extend_from_slice(extra);
+    run_ok(&args);
+    read_json(&fit_path)
+}

@@ -1,0 +1,303 @@
+//! Variable projection (Golub & Pereyra 1973): at fixed roughness, solve the colour parameters
+//! (Schlick F0 and the Lambertian albedo, per channel, within [0, 1]) in closed form, so the
+//! search runs over roughness only (ENGINEERING-NOTES.md, "Gradients").
+//!
+//! | piece | how |
+//! | --- | --- |
+//! | dependence on F0 | each pixel's prediction is a polynomial in a grey Schlick F0 of degree [`fresnel_degree`]: 1 for `single` (Schlick is linear in F0), 2 for `fast-msx` (`F^2`, eq. 19) and `turquin` (`f_single (1 + F0 k)`); the others are rational (`kulla-conty`'s `F_ms`) or long polynomials (one Fresnel factor per bounce of a walk) and get degree 4 |
+//! | basis | the model rendered at the Chebyshev-Lobatto nodes of F0 in [0, 1] (with the fit's common random numbers), converted to monomial coefficients per pixel |
+//! | diffuse | linear: the white Lambertian image [`crate::render::lambertian_pixels`] |
+//! | solve per channel | the weighted squared error `sum v (P(F0) + rho d - t)^2` from moment sums: `rho` in closed form, clamped to [0, 1] (non-negative least squares in one variable); `F0` by a scan of 201 points and golden-section refinement |
+//! | losses | those that are weighted squared errors ([`crate::loss::Loss::quadratic_weights`]): `l2`, `relative-l2` |
+//!
+//! For degree-1 and degree-2 models the projected loss is exact; for the others it is a
+//! polynomial approximation in F0, so the fitter always finishes with a joint search over all
+//! coordinates from the projected optimum.
+
+use super::objective::Objective;
+use super::params::{logit, sigmoid, FresnelFamily};
+use crate::bsdf::Model;
+use crate::render::lambertian_pixels;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Degree in F0 of the prediction's polynomial model (see the module docs).
+pub fn fresnel_degree(model: Model) -> usize {
+    match model {
+        Model::Single => 1,
+        Model::FastMsx | Model::Turquin => 2,
+        _ => 4,
+    }
+}
+
+/// Grid of the F0 scan before golden-section refinement.
+const F0_SCAN: usize = 201;
+const GOLDEN_ITERATIONS: usize = 80;
+
+/// The projected problem of one objective.
+pub struct Projection<'o, 'r> {
+    objective: &'o Objective<'r>,
+    /// F0 nodes (as the material sees them after the logit map).
+    nodes: Vec<f64>,
+    /// Per loss pixel and channel: weights `v` of the squared error.
+    weights: Vec<[f64; 3]>,
+    /// Per loss pixel: white Lambertian prediction, when the space fits a diffuse albedo.
+    diffuse: Option<Vec<[f64; 3]>>,
+    /// Number of roughness coordinates (1 isotropic, 2 anisotropic).
+    pub roughness_dim: usize,
+    /// Renders made so far (one per F0 node and solve).
+    renders: AtomicUsize,
+}
+
+/// Moment sums of one channel, from which the squared error at any (F0, rho) follows.
+struct Moments {
+    /// `sum v A_j A_k`, `sum v A_j t`, `sum v A_j d` over pixels (A = monomial coefficients).
+    aa: Vec<Vec<f64>>,
+    at: Vec<f64>,
+    ad: Vec<f64>,
+    tt: f64,
+    dd: f64,
+    dt: f64,
+}
+
+impl Moments {
+    /// `(squared error, rho)` at F0 = `f`, with rho optimal in [0, 1].
+    fn error(&self, f: f64) -> (f64, f64) {
+        let powers: Vec<f64> = (0..self.at.len()).map(|j| f.powi(j as i32)).collect();
+        let (mut pp, mut pt, mut pd) = (0.0, 0.0, 0.0);
+        for j in 0..powers.len() {
+            pt += powers[j] * self.at[j];
+            pd += powers[j] * self.ad[j];
+            for k in 0..powers.len() {
+                pp += powers[j] * powers[k] * self.aa[j][k];
+            }
+        }
+        let base = pp - 2.0 * pt + self.tt;
+        if self.dd <= 0.0 {
+            return (base, 0.0);
+        }
+        let rho = ((self.dt - pd) / self.dd).clamp(0.0, 1.0);
+        (base + 2.0 * rho * (pd - self.dt) + rho * rho * self.dd, rho)
+    }
+
+    /// F0 in [0, 1] minimising the error, with its rho and error.
+    fn minimise(&self) -> (f64, f64, f64) {
+        let grid = |i: usize| i as f64 / (F0_SCAN - 1) as f64;
+        let best = (0..F0_SCAN)
+            .min_by(|&a, &b| self.error(grid(a)).0.total_cmp(&self.error(grid(b)).0))
+            .expect("the scan has points");
+        let (mut lo, mut hi) = (
+            grid(best.saturating_sub(1)),
+            grid((best + 1).min(F0_SCAN - 1)),
+        );
+        let ratio = (5f64.sqrt() - 1.0) / 2.0;
+        for _ in 0..GOLDEN_ITERATIONS {
+            let a = hi - ratio * (hi - lo);
+            let b = lo + ratio * (hi - lo);
+            if self.error(a).0 < self.error(b).0 {
+                hi = b;
+            } else {
+                lo = a;
+            }
+        }
+        let candidates = [grid(best), 0.5 * (lo + hi)];
+        let f = candidates
+            .into_iter()
+            .min_by(|a, b| self.error(*a).0.total_cmp(&self.error(*b).0))
+            .expect("two candidates");
+        let (e, rho) = self.error(f);
+        (f, rho, e)
+    }
+}
+
+/// Solves `V c = y` for the monomial coefficients `c` of the polynomial through `(x_j, y_j)`
+/// (Vandermonde by Gaussian elimination with partial pivoting; K <= 5 and well separated
+/// nodes).
+fn monomial_coefficients(x: &[f64], y: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    let mut m: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            let mut row: Vec<f64> = (0..n).map(|j| x[i].powi(j as i32)).collect();
+            row.push(y[i]);
+            row
+        })
+        .collect();
+    for col in 0..n {
+        let pivot = (col..n)
+            .max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))
+            .expect("rows remain");
+        m.swap(col, pivot);
+        let pivot_row = m[col].clone();
+        for row in m.iter_mut().skip(col + 1) {
+            let factor = row[col] / pivot_row[col];
+            for (v, p) in row.iter_mut().zip(&pivot_row).skip(col) {
+                *v -= factor * p;
+            }
+        }
+    }
+    let mut c = vec![0.0; n];
+    for row in (0..n).rev() {
+        let s: f64 = (row + 1..n).map(|k| m[row][k] * c[k]).sum();
+        c[row] = (m[row][n] - s) / m[row][row];
+    }
+    c
+}
+
+impl<'o, 'r> Projection<'o, 'r> {
+    /// The projection of `objective`, or `None` when its space or loss does not allow one
+    /// (conductor Fresnel, or a loss that is not a weighted squared error).
+    pub fn new(objective: &'o Objective<'r>) -> Option<Self> {
+        let space = objective.space;
+        if space.fresnel != FresnelFamily::Schlick {
+            return None;
+        }
+        let weights = objective.image_loss().quadratic_weights()?;
+        let degree = fresnel_degree(space.model);
+        let nodes = (0..=degree)
+            .map(|j| {
+                let chebyshev =
+                    0.5 * (1.0 - (std::f64::consts::PI * j as f64 / degree as f64).cos());
+                sigmoid(logit(chebyshev))
+            })
+            .collect();
+        let diffuse = space
+            .diffuse
+            .then(|| lambertian_pixels(objective.records(), objective.pixels()));
+        Some(Projection {
+            objective,
+            nodes,
+            weights,
+            diffuse,
+            roughness_dim: if space.anisotropic { 2 } else { 1 },
+            renders: AtomicUsize::new(0),
+        })
+    }
+
+    /// Renders made so far: the cost of the projected search in objective evaluations.
+    pub fn renders(&self) -> usize {
+        self.renders.load(Ordering::Relaxed)
+    }
+
+    /// Full coordinates from roughness coordinates, grey F0 and per-channel diffuse.
+    fn coordinates(&self, roughness: &[f64], f0: [f64; 3], rho: [f64; 3]) -> Vec<f64> {
+        let mut x = roughness.to_vec();
+        x.extend(f0.map(logit));
+        if self.diffuse.is_some() {
+            x.extend(rho.map(logit));
+        }
+        x
+    }
+
+    /// The loss minimised over F0 and diffuse at roughness coordinates `roughness`, and the
+    /// full coordinates of that minimum.
+    pub fn solve(&self, roughness: &[f64]) -> (f64, Vec<f64>) {
+        self.renders.fetch_add(self.nodes.len(), Ordering::Relaxed);
+        let renders: Vec<Vec<[f64; 3]>> = self
+            .nodes
+            .iter()
+            .map(|&f| {
+                self.objective
+                    .predict(&self.coordinates(roughness, [f; 3], [0.0; 3]))
+            })
+            .collect();
+        let target = self.objective.targets();
+        let k = self.nodes.len();
+        let (mut f0, mut rho, mut loss) = ([0.0; 3], [0.0; 3], 0.0);
+        for c in 0..3 {
+            let mut m = Moments {
+                aa: vec![vec![0.0; k]; k],
+                at: vec![0.0; k],
+                ad: vec![0.0; k],
+                tt: 0.0,
+                dd: 0.0,
+                dt: 0.0,
+            };
+            for (p, v) in self.weights.iter().enumerate() {
+                let v = v[c];
+                if v == 0.0 {
+                    continue;
+                }
+                let values: Vec<f64> = renders.iter().map(|r| r[p][c]).collect();
+                let a = monomial_coefficients(&self.nodes, &values);
+                let (t, d) = (target[p][c], self.diffuse.as_ref().map_or(0.0, |d| d[p][c]));
+                for j in 0..k {
+                    m.at[j] += v * a[j] * t;
+                    m.ad[j] += v * a[j] * d;
+                    for l in 0..k {
+                        m.aa[j][l] += v * a[j] * a[l];
+                    }
+                }
+                m.tt += v * t * t;
+                m.dd += v * d * d;
+                m.dt += v * d * t;
+            }
+            let (f, r, e) = m.minimise();
+            (f0[c], rho[c], loss) = (f, r, loss + e);
+        }
+        (loss.max(0.0), self.coordinates(roughness, f0, rho))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn monomial_coefficients_reproduce_a_polynomial() {
+        let x = [0.0, 0.25, 0.5, 0.75, 1.0];
+        let c = [0.3, -1.2, 2.0, 0.5, -0.7];
+        let y: Vec<f64> = x
+            .iter()
+            .map(|&x: &f64| (0..5).map(|j| c[j] * x.powi(j as i32)).sum())
+            .collect();
+        for (got, want) in monomial_coefficients(&x, &y).iter().zip(c) {
+            assert!((got - want).abs() < 1e-10, "{got} vs {want}");
+        }
+    }
+
+    #[test]
+    fn moments_find_the_constrained_minimum() {
+        // Pixels with prediction A0 + A1 f and diffuse basis d; targets made with f = 0.7,
+        // rho = 0.2 are recovered exactly; targets needing f > 1 clamp to f = 1.
+        let pixels: Vec<([f64; 2], f64)> = (0..20)
+            .map(|i| {
+                (
+                    [0.1 + 0.01 * i as f64, 0.5 + 0.03 * i as f64],
+                    0.2 + 0.02 * (i % 7) as f64,
+                )
+            })
+            .collect();
+        let moments = |f: f64, rho: f64| {
+            let mut m = Moments {
+                aa: vec![vec![0.0; 2]; 2],
+                at: vec![0.0; 2],
+                ad: vec![0.0; 2],
+                tt: 0.0,
+                dd: 0.0,
+                dt: 0.0,
+            };
+            for (a, d) in &pixels {
+                let t = a[0] + a[1] * f + rho * d;
+                for j in 0..2 {
+                    m.at[j] += a[j] * t;
+                    m.ad[j] += a[j] * d;
+                    for k in 0..2 {
+                        m.aa[j][k] += a[j] * a[k];
+                    }
+                }
+                m.tt += t * t;
+                m.dd += d * d;
+                m.dt += d * t;
+            }
+            m
+        };
+        // Moment sums cancel to ~1e-14 of their size, which limits F0 to ~sqrt(1e-14) = 1e-7
+        // (the joint search that follows in a fit refines further).
+        let (f, rho, e) = moments(0.7, 0.2).minimise();
+        assert!(
+            (f - 0.7).abs() < 1e-6 && (rho - 0.2).abs() < 1e-6 && e.abs() < 1e-12,
+            "{f} {rho} {e}"
+        );
+        let (f, _, e) = moments(1.4, 0.0).minimise();
+        assert!(f == 1.0 && e > 0.0, "{f} {e}");
+    }
+}

@@ -1,0 +1,216 @@
+//! Where a fit starts: the global phase before the local search.
+//!
+//! | method | when | what |
+//! | --- | --- | --- |
+//! | `projection` | Schlick Fresnel and a squared-error loss (the default fits) | the projected loss ([`super::projection`]) over roughness only: the roughness scan below, then Brent's method (isotropic) or Nelder-Mead (anisotropic) around the best node |
+//! | `pso` | `--optimizer pso` | argmin's particle swarm over the box [`search_box`] of all coordinates, with a seeded generator |
+//! | `scan` | otherwise | the roughness scan with a white Fresnel whose per-channel scale is solved in closed form; conductors start at edge tint [`START_EDGE_TINT`] |
+//! | random | `--starts N`, for starts 2..N | uniform draws in [`search_box`], seeded |
+
+use super::local::simplex_around;
+use super::objective::Objective;
+use super::params::{FresnelFamily, ParamSpace};
+use super::projection::Projection;
+use crate::albedo::rng_stream;
+use crate::material::{FresnelSpec, Material};
+use crate::microfacet::fresnel::ior_from_reflectivity_edge_tint;
+use crate::render::render_pixels;
+use argmin::core::{CostFunction, Error as ArgminError, Executor, State};
+use argmin::solver::brent::BrentOpt;
+use argmin::solver::neldermead::NelderMead;
+use argmin::solver::particleswarm::ParticleSwarm;
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+/// How the start point of a local search was found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StartMethod {
+    Projection,
+    Pso,
+    Scan,
+    Random,
+    /// The result of the previous (coarser) pyramid level.
+    Coarser,
+}
+
+/// Roughness values of the coarse start scan: a geometric grid (ratio 1.8) from 0.012 to 2.4
+/// that avoids round values, so fits of synthetic sets made at round roughness exercise the
+/// optimiser rather than land on a scan node.
+const SCAN_ALPHAS: [f64; 10] = [
+    0.012, 0.0216, 0.0389, 0.07, 0.126, 0.227, 0.408, 0.735, 1.32, 2.38,
+];
+
+/// Start edge tint of conductor fits (Gulbrandsen's g): measured metals lie between 0.85 and
+/// 0.99 (Cu, Au, Ag, Al at 450-650 nm), and for F0 above ~0.9 photos constrain g only weakly, so
+/// the start is where an unconstrained g should stay.
+const START_EDGE_TINT: f64 = 0.9;
+
+/// Particles and iterations of the swarm (600 evaluations).
+const PSO_PARTICLES: usize = 20;
+const PSO_ITERATIONS: u64 = 30;
+
+/// The box of the global phases, in coordinates: alpha in [0.005, 2.5], colour logits in
+/// [-5, 5] (F0 in [0.007, 0.993]), diffuse logits in [-7, 0] (albedo in [0.001, 0.5]).
+pub fn search_box(space: &ParamSpace) -> (Vec<f64>, Vec<f64>) {
+    let roughness = if space.anisotropic { 2 } else { 1 };
+    let colour = match space.fresnel {
+        FresnelFamily::Schlick => 3,
+        FresnelFamily::Conductor => 6,
+    };
+    let mut lower = vec![0.005f64.ln(); roughness];
+    let mut upper = vec![2.5f64.ln(); roughness];
+    lower.extend(vec![-5.0; colour]);
+    upper.extend(vec![5.0; colour]);
+    if space.diffuse {
+        lower.extend([-7.0; 3]);
+        upper.extend([0.0; 3]);
+    }
+    (lower, upper)
+}
+
+/// `count` uniform draws in the search box, from the seed's own stream.
+pub fn random_points(space: &ParamSpace, seed: u64, count: usize) -> Vec<Vec<f64>> {
+    let (lower, upper) = search_box(space);
+    let mut rng = rng_stream(seed, u64::MAX - 1);
+    (0..count)
+        .map(|_| {
+            lower
+                .iter()
+                .zip(&upper)
+                .map(|(lo, hi)| rng.random_range(*lo..*hi))
+                .collect()
+        })
+        .collect()
+}
+
+/// The scan start: the node alpha whose white-Fresnel prediction, scaled per channel by the
+/// least-squares factor `sum p t / sum p^2`, has the lowest squared error.
+pub fn scan_start(objective: &Objective) -> Material {
+    let space = objective.space;
+    let records = objective.records();
+    let pixels = objective.pixels();
+    let mut best: Option<(f64, f64, [f64; 3])> = None;
+    for alpha in SCAN_ALPHAS {
+        let probe = Material {
+            model: space.model,
+            ndf: space.ndf,
+            height: space.height,
+            alpha: [alpha; 2],
+            fresnel: FresnelSpec::White,
+            diffuse: [0.0; 3],
+        };
+        let predicted = render_pixels(&probe, records, pixels, objective.seed());
+        let mut err = 0.0;
+        let mut scale = [0.0; 3];
+        for c in 0..3 {
+            let (mut pt, mut pp, mut tt) = (0.0, 0.0, 0.0);
+            for (k, &p) in pixels.iter().enumerate() {
+                let (w, t, q) = (records.weight[p], records.target[p][c], predicted[k][c]);
+                pt += w * q * t;
+                pp += w * q * q;
+                tt += w * t * t;
+            }
+            scale[c] = if pp > 0.0 { pt / pp } else { 0.0 };
+            err += tt - scale[c] * pt;
+        }
+        if best.is_none_or(|b| err < b.0) {
+            best = Some((err, alpha, scale));
+        }
+    }
+    let (_, alpha, scale) = best.expect("the scan has points");
+    let f0 = scale.map(|s| s.clamp(0.02, 0.98));
+    let fresnel = match space.fresnel {
+        FresnelFamily::Schlick => FresnelSpec::Schlick { f0 },
+        FresnelFamily::Conductor => {
+            let ior = f0.map(|r| ior_from_reflectivity_edge_tint(r, START_EDGE_TINT));
+            FresnelSpec::Conductor {
+                eta: ior.map(|p| p.0),
+                k: ior.map(|p| p.1),
+            }
+        }
+    };
+    Material {
+        model: space.model,
+        ndf: space.ndf,
+        height: space.height,
+        alpha: [alpha; 2],
+        fresnel,
+        diffuse: if space.diffuse { [0.02; 3] } else { [0.0; 3] },
+    }
+}
+
+/// The projected loss as an argmin cost over roughness coordinates (a vector, or one scalar).
+struct Projected<'p, 'o, 'r>(&'p Projection<'o, 'r>);
+
+impl CostFunction for Projected<'_, '_, '_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, roughness: &Vec<f64>) -> Result<f64, ArgminError> {
+        Ok(self.0.solve(roughness).0)
+    }
+}
+
+struct ProjectedScalar<'p, 'o, 'r>(&'p Projection<'o, 'r>);
+
+impl CostFunction for ProjectedScalar<'_, '_, '_> {
+    type Param = f64;
+    type Output = f64;
+    fn cost(&self, ln_alpha: &f64) -> Result<f64, ArgminError> {
+        Ok(self.0.solve(&[*ln_alpha]).0)
+    }
+}
+
+/// The projected start: full coordinates of the best projected solve.
+pub fn projected_start(projection: &Projection) -> Result<Vec<f64>, ArgminError> {
+    let ln: Vec<f64> = SCAN_ALPHAS.iter().map(|a| a.ln()).collect();
+    let dim = projection.roughness_dim;
+    let scan: Vec<f64> = ln
+        .iter()
+        .map(|&l| projection.solve(&vec![l; dim]).0)
+        .collect();
+    let best = (0..ln.len())
+        .min_by(|&a, &b| scan[a].total_cmp(&scan[b]))
+        .expect("the scan has points");
+    let roughness = if dim == 1 {
+        let (lo, hi) = (ln[best.saturating_sub(1)], ln[(best + 1).min(ln.len() - 1)]);
+        let solver = BrentOpt::new(lo, hi).set_tolerance(1.5e-8, 1e-10);
+        let res = Executor::new(ProjectedScalar(projection), solver)
+            .configure(|s| s.max_iters(100))
+            .run()?;
+        let x = *res.state.get_best_param().unwrap_or(&ln[best]);
+        vec![if scan[best] < res.state.get_best_cost() {
+            ln[best]
+        } else {
+            x
+        }]
+    } else {
+        let centre = vec![ln[best]; dim];
+        let solver = NelderMead::new(simplex_around(&centre)).with_sd_tolerance(1e-12)?;
+        let res = Executor::new(Projected(projection), solver)
+            .configure(|s| s.max_iters(200))
+            .run()?;
+        res.state.get_best_param().cloned().unwrap_or(centre)
+    };
+    Ok(projection.solve(&roughness).1)
+}
+
+/// The particle swarm start over all coordinates, seeded by the fit's seed.
+pub fn swarm_start(objective: &Objective, seed: u64) -> Result<Vec<f64>, ArgminError> {
+    let solver = ParticleSwarm::new(search_box(&objective.space), PSO_PARTICLES)
+        .with_rng_generator(rng_stream(seed, u64::MAX - 2));
+    let res = Executor::new(objective, solver)
+        .configure(|s| s.max_iters(PSO_ITERATIONS))
+        .run()?;
+    let best = res
+        .state
+        .get_best_param()
+        .map(|p| p.position.clone())
+        .expect("the swarm has particles");
+    Ok(best)
+}
+
+/// Start coordinates of the scan start.
+pub fn scan_point(objective: &Objective) -> Vec<f64> {
+    objective.space.point(&scan_start(objective))
+}

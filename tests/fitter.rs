@@ -1,0 +1,147 @@
+//! The fitter's machinery (issue "The fitter"): variable projection against the joint search,
+//! the global phases (particle swarm, seeded multi-start), coarse-to-fine, and every loss.
+
+mod common;
+use common::*;
+
+fn alpha(fit: &serde_json::Value) -> f64 {
+    fit["alpha"][0].as_f64().unwrap()
+}
+
+/// The fitted alpha and F0 are within `rel` and `abs` of the bundled set's truth.
+fn assert_recovered(fit: &serde_json::Value, truth: &serde_json::Value, rel: f64, abs: f64) {
+    let (got, want) = (alpha(fit), truth["alpha"][0].as_f64().unwrap());
+    assert!(((got - want) / want).abs() < rel, "alpha {got} vs {want}");
+    let (f0, f0_truth) = (triple(&fit["f0"]), material_f0(truth));
+    for c in 0..3 {
+        assert!(
+            (f0[c] - f0_truth[c]).abs() < abs,
+            "F0 {f0:?} vs {f0_truth:?}"
+        );
+    }
+}
+
+#[test]
+fn variable_projection_reaches_the_joint_optimum_with_fewer_evaluations() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = repo("datasets/aluminium-pinhole");
+    let truth = read_json(&repo("datasets/aluminium-pinhole/material.json"));
+    let projected = fit_json(&set, &[], dir.path());
+    let joint = fit_json(&set, &["--no-projection"], dir.path());
+    assert_eq!(projected["start_method"], "projection");
+    assert_eq!(joint["start_method"], "scan");
+    // Same optimum (Schlick on conductor photos: a model mismatch, so not the truth exactly).
+    assert!(
+        ((alpha(&projected) - alpha(&joint)) / alpha(&joint)).abs() < 1e-4,
+        "{} vs {}",
+        alpha(&projected),
+        alpha(&joint)
+    );
+    let (a, b) = (triple(&projected["f0"]), triple(&joint["f0"]));
+    for c in 0..3 {
+        assert!((a[c] - b[c]).abs() < 1e-4, "{a:?} vs {b:?}");
+    }
+    let (la, lb) = (
+        projected["loss"].as_f64().unwrap(),
+        joint["loss"].as_f64().unwrap(),
+    );
+    assert!(la <= lb * (1.0 + 1e-6), "projected loss {la} vs joint {lb}");
+    assert_recovered(&projected, &truth, 0.01, 0.01);
+    // The point of projection: the search is over roughness only.
+    let (ea, eb) = (
+        projected["evaluations"].as_u64().unwrap(),
+        joint["evaluations"].as_u64().unwrap(),
+    );
+    assert!(ea < eb, "projected {ea} evaluations vs joint {eb}");
+}
+
+#[test]
+fn projection_solves_the_diffuse_albedo_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let material = dir.path().join("m.json");
+    std::fs::write(
+        &material,
+        r#"{"model":"fast-msx","alpha":[0.45,0.45],
+        "fresnel":{"kind":"schlick","f0":[0.9,0.5,0.2]},"diffuse":[0.02,0.15,0.3]}"#,
+    )
+    .unwrap();
+    let set = dir.path().join("set");
+    let capture = std::fs::read_to_string(repo("datasets/sources/copper-flash.capture.toml"))
+        .unwrap()
+        .replace("resolution = [128, 128]", "resolution = [40, 40]");
+    std::fs::write(dir.path().join("c.toml"), capture).unwrap();
+    run_ok(&[
+        "synth",
+        "--material",
+        material.to_str().unwrap(),
+        "--capture",
+        dir.path().join("c.toml").to_str().unwrap(),
+        "-o",
+        set.to_str().unwrap(),
+    ]);
+    let r = fit_json(&set, &["--models", "fast-msx", "--diffuse"], dir.path());
+    assert_eq!(r["start_method"], "projection");
+    assert!(
+        ((alpha(&r) - 0.45) / 0.45).abs() < 1e-3,
+        "alpha {}",
+        alpha(&r)
+    );
+    let (f0, diffuse) = (triple(&r["f0"]), triple(&r["diffuse"]));
+    for c in 0..3 {
+        assert!((f0[c] - [0.9, 0.5, 0.2][c]).abs() < 1e-3, "F0 {f0:?}");
+        assert!(
+            (diffuse[c] - [0.02, 0.15, 0.3][c]).abs() < 1e-3,
+            "diffuse {diffuse:?}"
+        );
+    }
+}
+
+#[test]
+fn swarm_multistart_and_pyramid_find_the_same_answer() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = repo("datasets/aluminium-pinhole");
+    let truth = read_json(&repo("datasets/aluminium-pinhole/material.json"));
+    let pso = fit_json(
+        &set,
+        &["--optimizer", "pso", "--fresnel", "conductor"],
+        dir.path(),
+    );
+    assert_eq!(pso["start_method"], "pso");
+    assert_recovered(&pso, &truth, 0.01, 0.01);
+
+    let multi = fit_json(&set, &["--starts", "3", "--seed", "5"], dir.path());
+    let starts = multi["starts"].as_array().unwrap();
+    assert_eq!(starts.len(), 3);
+    assert_eq!(starts[1]["method"], "random");
+    // Best first, and the file reports the best.
+    let losses: Vec<f64> = starts.iter().map(|s| s["loss"].as_f64().unwrap()).collect();
+    assert!(losses.windows(2).all(|w| w[0] <= w[1]), "{losses:?}");
+    assert_recovered(&multi, &truth, 0.01, 0.01);
+    // A fixed seed makes the multi-start run reproducible to the bit.
+    let again = fit_json(&set, &["--starts", "3", "--seed", "5"], dir.path());
+    assert_eq!(multi["alpha"], again["alpha"]);
+    assert_eq!(multi["starts"], again["starts"]);
+
+    let pyramid = fit_json(&set, &["--pyramid", "3"], dir.path());
+    let levels = pyramid["levels"].as_array().unwrap();
+    // 96x96 -> 48 -> 24: three levels, coarsest first.
+    let widths: Vec<u64> = levels
+        .iter()
+        .map(|l| l["resolution"][0].as_u64().unwrap())
+        .collect();
+    assert_eq!(widths, vec![24, 48, 96]);
+    assert_eq!(pyramid["start_method"], "coarser");
+    assert_recovered(&pyramid, &truth, 0.01, 0.01);
+}
+
+#[test]
+fn every_loss_recovers_the_bundled_copper_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = repo("datasets/copper-flash");
+    let truth = read_json(&repo("datasets/copper-flash/material.json"));
+    for loss in ["relative-l2", "ssim"] {
+        let r = fit_json(&set, &["--loss", loss], dir.path());
+        assert_eq!(r["loss_kind"], loss);
+        assert_recovered(&r, &truth, 0.01, 0.01);
+    }
+}
