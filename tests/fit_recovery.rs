@@ -40,20 +40,6 @@ fn assert_f0(got: [f64; 3], truth: [f64; 3], abs: f64) {
     }
 }
 
-fn synth(material: &Path, capture: &Path, out: &Path, extra: &[&str]) {
-    let mut args = vec![
-        "synth",
-        "--material",
-        material.to_str().unwrap(),
-        "--capture",
-        capture.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    run_ok(&args);
-}
-
 #[test]
 fn bundled_copper_flash_recovers_alpha_and_f0() {
     let dir = tempfile::tempdir().unwrap();

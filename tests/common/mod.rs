@@ -74,3 +74,18 @@ pub fn fit_json(set: &Path, extra: &[&str], out: &Path) -> serde_json::Value {
     run_ok(&args);
     read_json(&fit_path)
 }
+
+/// `bouncefit synth --material M --capture C -o OUT EXTRA...`.
+pub fn synth(material: &Path, capture: &Path, out: &Path, extra: &[&str]) {
+    let mut args = vec![
+        "synth",
+        "--material",
+        material.to_str().unwrap(),
+        "--capture",
+        capture.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run_ok(&args);
+}
