@@ -6,13 +6,15 @@
 //! - [`scalar`]: the scalar trait (f64, f32, dual numbers) and small vector types;
 //! - [`microfacet`]: distributions, Lambda, masking, visible normals, Fresnel;
 //! - [`bsdf`]: the BRDF trait and one file per model;
-//! - [`capture`], [`shading`]: photo sets and the per-pixel records computed from them.
+//! - [`capture`], [`shading`]: photo sets and the per-pixel records computed from them;
+//! - [`export`]: a material for Mitsuba 3, glTF and MaterialX.
 
 pub mod albedo;
 pub mod bsdf;
 pub mod capture;
 pub mod commands;
 pub mod error;
+pub mod export;
 pub mod fit;
 pub mod loss;
 pub mod material;

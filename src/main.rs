@@ -30,6 +30,8 @@ enum Command {
     Render(commands::synth::RenderArgs),
     /// Fit material parameters to a photo set.
     Fit(commands::fit::FitArgs),
+    /// Write a fit or material for a renderer (json, mitsuba, gltf, materialx).
+    Export(commands::export::ExportArgs),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +43,7 @@ fn main() -> ExitCode {
         Command::Synth(args) => commands::synth::run_synth(args),
         Command::Render(args) => commands::synth::run_render(args),
         Command::Fit(args) => commands::fit::run_fit(args),
+        Command::Export(args) => commands::export::run_export(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

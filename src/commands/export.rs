@@ -1,0 +1,81 @@
+//! `bouncefit export FIT.json --format json|mitsuba|gltf|materialx -o FILE`: write a fitted (or
+//! any) material for a renderer (formats and approximations: [`crate::export`]).
+//!
+//! The input is a fit file or a material file (both read by [`Material::load`]). For `mitsuba`
+//! the scene's camera and light come from the capture a fit file names in its `capture` field
+//! (resolved against the working directory, then against the fit file's folder), else from the
+//! default flash setup; the scene's comment says which and why. The output is written
+//! atomically and replaces an existing file only with `--force`.
+
+use super::output::check_overwrite;
+use crate::capture::atomic_file::write_atomically;
+use crate::capture::Capture;
+use crate::error::{Error, Result};
+use crate::export::mitsuba::Scene;
+use crate::export::{gltf, json, materialx, mitsuba, Conversion, ExportFormat};
+use crate::material::Material;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args, Debug)]
+pub struct ExportArgs {
+    /// Fit file (from `bouncefit fit`) or material file.
+    pub input: PathBuf,
+    /// json | mitsuba | gltf | materialx
+    #[arg(long)]
+    pub format: String,
+    /// File to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
+}
+
+pub fn run_export(args: &ExportArgs) -> Result<()> {
+    let format: ExportFormat = args.format.parse().map_err(|msg: String| {
+        Error::argument(
+            "--format",
+            format!("{msg}, exporting {}", args.input.display()),
+        )
+    })?;
+    check_overwrite(&args.output, args.force)?;
+    let material = Material::load(&args.input)?;
+    let conversion = Conversion::new(&material);
+    let text = match format {
+        ExportFormat::Json => json::document(&conversion),
+        ExportFormat::Gltf => gltf::document(&conversion),
+        ExportFormat::Materialx => materialx::document(&conversion),
+        ExportFormat::Mitsuba => mitsuba::document(&conversion, &scene_of(&args.input)),
+    };
+    write_atomically(&args.output, |w| {
+        w.write_all(text.as_bytes())
+            .map_err(|e| Error::io(&args.output, e))
+    })?;
+    if format != ExportFormat::Json {
+        if let Some(energy) = conversion.energy() {
+            eprintln!("note: {}", energy.note(material.model));
+        }
+    }
+    println!("wrote {}", args.output.display());
+    Ok(())
+}
+
+/// The scene of the capture named by the fit file's `capture` field, else the default flash.
+fn scene_of(fit: &Path) -> Scene {
+    let named = std::fs::read_to_string(fit)
+        .ok()
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        .and_then(|value| value.get("capture")?.as_str().map(str::to_owned));
+    let Some(named) = named else {
+        return Scene::default_flash("the input names no capture");
+    };
+    let beside_fit = fit.parent().unwrap_or(Path::new(".")).join(&named);
+    let opened = Capture::open(Path::new(&named))
+        .or_else(|first| Capture::open(&beside_fit).map_err(|_| first));
+    match opened {
+        Ok(capture) => Scene::from_capture(&capture, &named)
+            .unwrap_or_else(|| Scene::default_flash(&format!("capture '{named}' has no photos"))),
+        Err(err) => Scene::default_flash(&format!("capture '{named}' not readable: {err}")),
+    }
+}

@@ -1,0 +1,235 @@
+//! `--format materialx`: a MaterialX 1.39 document with two materials for the same fit, one
+//! `standard_surface` (Autodesk Standard Surface 1.0.1) and one `open_pbr_surface` (OpenPBR
+//! 1.1), with the input names of the nodedefs in the MaterialX library
+//! (`libraries/bxdf/standard_surface.mtlx`, `libraries/bxdf/open_pbr_surface.mtlx`).
+//!
+//! | fitted | `standard_surface` | `open_pbr_surface` |
+//! | --- | --- | --- |
+//! | metal base | `metalness` 1, `base_color` = F0, `specular_color` = Gulbrandsen edge tint (its metal is Gulbrandsen's artistic conductor: exact for a conductor fit whose tint lies in [0, 1]) | `base_metalness` 1, `base_color` = F0, `specular_color` = F82 tint (its metal is the F82-tint Schlick: exact for a Schlick fit, exact at 0 and 82 degrees for a conductor) |
+//! | dielectric base | `metalness` 0, `base_color` = diffuse, `specular_IOR`, `specular_color` = F0 tint | `base_metalness` 0, `base_color` = diffuse, `specular_ior`, `specular_color` = F0 tint |
+//! | isotropic `alpha` | `specular_roughness = sqrt(alpha)` | `specular_roughness = sqrt(alpha)` |
+//! | anisotropic, `alpha_t >= alpha_b` | `roughness_anisotropy`: `alpha_t = r^2 / sqrt(1 - a)`, `alpha_b = r^2 sqrt(1 - a)`, so `r = (alpha_t alpha_b)^(1/4)`, `specular_anisotropy = 1 - alpha_b / alpha_t` (at most 0.98), `specular_rotation` 0, or 0.25 (90 degrees) when `alpha_y > alpha_x` | `open_pbr_anisotropy`: `alpha_t = r^2 sqrt(2 / (1 + (1 - a)^2))`, `alpha_b = (1 - a) alpha_t`, so `r = ((alpha_t^2 + alpha_b^2) / 2)^(1/4)`, `specular_roughness_anisotropy = 1 - alpha_b / alpha_t`; OpenPBR has no rotation input, the tangent must follow the larger alpha |
+//!
+//! Both shading models are single-bounce GGX with their own energy handling; the document's
+//! comments state what differs from the fit (model, distribution, diffuse layer).
+
+use super::{number, triple, xml_comment, Base, Conversion};
+use crate::material::FresnelSpec;
+use crate::microfacet::fresnel::ior_from_reflectivity_edge_tint;
+
+/// Standard Surface clamps its anisotropy to this (`mx_roughness_anisotropy`).
+const STANDARD_SURFACE_MAX_ANISOTROPY: f64 = 0.98;
+
+/// A typed input value of a MaterialX node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Input {
+    Float(f64),
+    Color3([f64; 3]),
+}
+
+fn inputs_xml(node: &str, name: &str, inputs: &[(&str, Input)]) -> String {
+    let mut xml = format!("  <{node} name=\"{name}\" type=\"surfaceshader\">\n");
+    for (input, value) in inputs {
+        let (kind, text) = match *value {
+            Input::Float(x) => ("float", number(x)),
+            Input::Color3(c) => ("color3", triple(c)),
+        };
+        xml += &format!("    <input name=\"{input}\" type=\"{kind}\" value=\"{text}\" />\n");
+    }
+    xml + &format!("  </{node}>\n")
+}
+
+fn material_xml(name: &str, shader: &str) -> String {
+    format!(
+        "  <surfacematerial name=\"{name}\" type=\"material\">\n    <input name=\"surfaceshader\" type=\"surfaceshader\" nodename=\"{shader}\" />\n  </surfacematerial>\n"
+    )
+}
+
+/// The input names in which the two shaders differ for the same meaning.
+struct ShaderNames {
+    base_weight: &'static str,
+    metalness: &'static str,
+    specular_weight: &'static str,
+    ior: &'static str,
+}
+
+/// The inputs both shaders share up to their names; `metal_specular_color` is the shader's own
+/// metal edge colour, `anisotropic` gives its roughness inputs from `(alpha_t, alpha_b,
+/// alpha_y > alpha_x)`.
+fn shader_inputs(
+    conversion: &Conversion,
+    names: ShaderNames,
+    metal_specular_color: [f64; 3],
+    anisotropic: impl Fn(f64, f64, bool) -> Vec<(&'static str, Input)>,
+) -> Vec<(&'static str, Input)> {
+    let (metalness, base_color, specular_color, ior) = match conversion.base {
+        Base::Metal => (1.0, conversion.f0, metal_specular_color, None),
+        Base::Dielectric { ior, specular_tint } => {
+            (0.0, conversion.material.diffuse, specular_tint, Some(ior))
+        }
+    };
+    let mut inputs = vec![
+        (names.base_weight, Input::Float(1.0)),
+        ("base_color", Input::Color3(base_color)),
+        (names.metalness, Input::Float(metalness)),
+        (names.specular_weight, Input::Float(1.0)),
+        ("specular_color", Input::Color3(specular_color)),
+    ];
+    if let Some(ior) = ior {
+        inputs.push((names.ior, Input::Float(ior)));
+    }
+    let [ax, ay] = conversion.material.alpha;
+    if conversion.is_anisotropic() {
+        inputs.extend(anisotropic(ax.max(ay), ax.min(ay), ay > ax));
+    } else {
+        inputs.push(("specular_roughness", Input::Float(ax.sqrt())));
+    }
+    inputs
+}
+
+fn standard_surface(conversion: &Conversion) -> Vec<(&'static str, Input)> {
+    let names = ShaderNames {
+        base_weight: "base",
+        metalness: "metalness",
+        specular_weight: "specular",
+        ior: "specular_IOR",
+    };
+    shader_inputs(
+        conversion,
+        names,
+        conversion.edge_tint,
+        |high, low, along_y| {
+            vec![
+                ("specular_roughness", Input::Float((high * low).powf(0.25))),
+                (
+                    "specular_anisotropy",
+                    Input::Float((1.0 - low / high).min(STANDARD_SURFACE_MAX_ANISOTROPY)),
+                ),
+                (
+                    "specular_rotation",
+                    Input::Float(if along_y { 0.25 } else { 0.0 }),
+                ),
+            ]
+        },
+    )
+}
+
+fn open_pbr_surface(conversion: &Conversion) -> Vec<(&'static str, Input)> {
+    let names = ShaderNames {
+        base_weight: "base_weight",
+        metalness: "base_metalness",
+        specular_weight: "specular_weight",
+        ior: "specular_ior",
+    };
+    shader_inputs(conversion, names, conversion.f82_tint, |high, low, _| {
+        vec![
+            (
+                "specular_roughness",
+                Input::Float(((high * high + low * low) / 2.0).powf(0.25)),
+            ),
+            (
+                "specular_roughness_anisotropy",
+                Input::Float(1.0 - low / high),
+            ),
+        ]
+    })
+}
+
+fn notes(conversion: &Conversion) -> Vec<String> {
+    let material = &conversion.material;
+    let mut notes = Vec::new();
+    if conversion.base == Base::Metal {
+        let (eta, k) = (conversion.conductor.eta, conversion.conductor.k);
+        let tint_error = (0..3)
+            .map(|c| {
+                let (e, kk) =
+                    ior_from_reflectivity_edge_tint(conversion.f0[c], conversion.edge_tint[c]);
+                (e - eta[c]).abs().max((kk - k[c]).abs())
+            })
+            .fold(0.0, f64::max);
+        let conductor_source = match material.fresnel {
+            FresnelSpec::Conductor { .. } => "the fitted conductor".to_string(),
+            _ => format!(
+                "the conductor with the fitted F0 closest to Schlick's curve (largest Fresnel difference {})",
+                number(conversion.conductor.max_error)
+            ),
+        };
+        notes.push(format!(
+            "standard_surface: base_color and specular_color are Gulbrandsen's reflectivity and \
+             edge tint of {conductor_source}; they give back its eta, k to {}",
+            number(tint_error)
+        ));
+        notes.push(match material.fresnel {
+            FresnelSpec::Conductor { .. } => "open_pbr_surface: specular_color is the F82 tint, \
+                 the conductor's reflectance at cos = 1/7 over Schlick's; the F82-tint curve \
+                 matches the conductor at 0 and 82 degrees"
+                .to_string(),
+            _ => "open_pbr_surface: specular_color 1 makes its F82-tint Fresnel Schlick's exactly"
+                .to_string(),
+        });
+    }
+    if conversion.is_anisotropic() {
+        let [ax, ay] = material.alpha;
+        let (high, low, along_y) = (ax.max(ay), ax.min(ay), ay > ax);
+        if 1.0 - low / high > STANDARD_SURFACE_MAX_ANISOTROPY {
+            notes.push(format!(
+                "standard_surface clamps its anisotropy at {STANDARD_SURFACE_MAX_ANISOTROPY}: \
+                 the fitted ratio alpha_b / alpha_t = {} is not reached",
+                number(low / high)
+            ));
+        }
+        if along_y {
+            notes.push(
+                "open_pbr_surface has no rotation input: the larger roughness is along y, so \
+                 geometry_tangent must point along the sample's y axis"
+                    .into(),
+            );
+        }
+    }
+    notes.extend(conversion.ggx_roughness_notes("standard_surface and open_pbr_surface"));
+    if let Base::Dielectric { .. } = conversion.base {
+        notes.push(
+            "both shaders layer the diffuse under the specular (weighted by its transmission); \
+             the fit adds them"
+                .into(),
+        );
+    }
+    notes.extend(conversion.dropped_diffuse_note());
+    notes.extend(conversion.common_notes());
+    notes
+}
+
+/// The `.mtlx` document for `conversion`.
+pub fn document(conversion: &Conversion) -> String {
+    let mut xml = String::from("<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n");
+    xml += &xml_comment(
+        "  ",
+        &format!(
+            "bouncefit {} export of a '{}' fit: the same material as standard_surface and as open_pbr_surface",
+            env!("CARGO_PKG_VERSION"),
+            conversion.material.model.name()
+        ),
+    );
+    for note in notes(conversion) {
+        xml += &xml_comment("  ", &note);
+    }
+    xml += &inputs_xml(
+        "standard_surface",
+        "SR_bouncefit_standard_surface",
+        &standard_surface(conversion),
+    );
+    xml += &material_xml(
+        "M_bouncefit_standard_surface",
+        "SR_bouncefit_standard_surface",
+    );
+    xml += &inputs_xml(
+        "open_pbr_surface",
+        "SR_bouncefit_open_pbr_surface",
+        &open_pbr_surface(conversion),
+    );
+    xml += &material_xml(
+        "M_bouncefit_open_pbr_surface",
+        "SR_bouncefit_open_pbr_surface",
+    );
+    xml + "</materialx>\n"
+}
