@@ -66,6 +66,39 @@ impl<'a> Loss<'a> {
             .sum()
     }
 
+    /// Derivative of [`Loss::pixel`] with respect to each channel of the prediction.
+    fn pixel_gradient(&self, predicted: [f64; 3], index: usize) -> [f64; 3] {
+        let t = self.target[index];
+        [0, 1, 2].map(|c| match self.kind {
+            LossKind::L2 => 2.0 * (predicted[c] - t[c]),
+            LossKind::LogL1 => {
+                let x = (predicted[c] / self.scale).ln_1p() - (t[c].max(0.0) / self.scale).ln_1p();
+                // d rho / d x = x / sqrt(x^2 + d^2); d x / d p = 1 / (s + p).
+                x / (x * x + LOG_L1_SMOOTHING * LOG_L1_SMOOTHING).sqrt()
+                    / (self.scale + predicted[c])
+            }
+        })
+    }
+
+    /// `d value / d predicted` per pixel and channel, with the weighting of [`Loss::value`]
+    /// (zero for pixels of zero weight): the first factor of the chain rule of exact gradients.
+    pub fn gradient(&self, predicted: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        let wsum: f64 = self.weight.iter().filter(|w| **w > 0.0).sum();
+        let norm = 1.0 / (3.0 * wsum.max(f64::MIN_POSITIVE));
+        predicted
+            .iter()
+            .zip(self.weight)
+            .enumerate()
+            .map(|(i, (p, w))| {
+                if *w > 0.0 {
+                    self.pixel_gradient(*p, i).map(|g| w * norm * g)
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect()
+    }
+
     /// Weighted mean loss of a full prediction (same length as the targets).
     pub fn value(&self, predicted: &[[f64; 3]]) -> f64 {
         let (mut sum, mut wsum) = (0.0, 0.0);
@@ -96,6 +129,35 @@ mod tests {
         }
         // Zero-weight pixels do not count.
         let loss = Loss::new(LossKind::L2, &target, &[1.0, 0.0]);
+        assert_eq!(loss.gradient(&[target[0], [9.0; 3]]), vec![[0.0; 3]; 2]);
+        let loss = Loss::new(LossKind::L2, &target, &[1.0, 0.0]);
         assert_eq!(loss.value(&[target[0], [9.0; 3]]), 0.0);
+    }
+
+    #[test]
+    fn gradient_matches_central_differences_of_the_value() {
+        let target = vec![[0.5, 1.0, 2.0], [0.1, 0.2, 0.3], [0.05, 0.0, 4.0]];
+        let weight = vec![1.0, 0.5, 2.0];
+        let predicted = vec![[0.6, 0.9, 2.5], [0.1, 0.35, 0.2], [0.01, 0.02, 3.0]];
+        for kind in [LossKind::L2, LossKind::LogL1] {
+            let loss = Loss::new(kind, &target, &weight);
+            let gradient = loss.gradient(&predicted);
+            for i in 0..predicted.len() {
+                for c in 0..3 {
+                    let h = 1e-6 * predicted[i][c].max(1e-3);
+                    let mut probe = predicted.clone();
+                    probe[i][c] += h;
+                    let plus = loss.value(&probe);
+                    probe[i][c] -= 2.0 * h;
+                    let minus = loss.value(&probe);
+                    let fd = (plus - minus) / (2.0 * h);
+                    assert!(
+                        (gradient[i][c] - fd).abs() <= 1e-6 * fd.abs().max(1e-3),
+                        "{kind:?} pixel {i} channel {c}: {} vs {fd}",
+                        gradient[i][c]
+                    );
+                }
+            }
+        }
     }
 }

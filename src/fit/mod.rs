@@ -3,7 +3,8 @@
 //! 1. Start: a coarse scan of roughness (log-spaced, isotropic) with a white Fresnel whose
 //!    per-channel scale is solved in closed form; the best scan point gives alpha and F0.
 //! 2. Optimise all free coordinates of the [`ParamSpace`] with argmin: Nelder-Mead, or L-BFGS
-//!    (More-Thuente line search) on central finite-difference gradients.
+//!    (More-Thuente line search) on exact dual-number gradients where the model allows, central
+//!    finite differences otherwise or on request ([`objective::GradientMethod`]).
 //! 3. Report: the material, loss, per-photo losses, the optimiser trace, evaluation counts and
 //!    timings, in the fit file format of DESIGN.md.
 
@@ -23,7 +24,7 @@ use argmin::core::{Error as ArgminError, Executor, State, KV};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::neldermead::NelderMead;
 use argmin::solver::quasinewton::LBFGS;
-use objective::Objective;
+use objective::{GradientMethod, Objective};
 use params::{FresnelFamily, ParamSpace};
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex};
@@ -43,6 +44,8 @@ pub struct FitOptions {
     pub space: ParamSpace,
     pub optimizer: Optimizer,
     pub loss: LossKind,
+    /// How L-BFGS gets its gradients (exact where the model allows).
+    pub gradient: GradientMethod,
     pub max_iters: u64,
     pub seed: u64,
     /// Show a progress bar (or plain progress lines when stderr is not a terminal).
@@ -75,6 +78,9 @@ pub struct ModelFit {
     pub loss: f64,
     pub loss_kind: LossKind,
     pub optimizer: Optimizer,
+    /// The gradient L-BFGS used (`None` for Nelder-Mead, which needs none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gradient: Option<GradientMethod>,
     pub iterations: u64,
     pub evaluations: usize,
     pub termination: String,
@@ -192,7 +198,8 @@ impl<I: State<Float = f64>> Observe<I> for TraceObserver {
 pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<ModelFit> {
     let started = Instant::now();
     let space = options.space;
-    let objective = Objective::new(space, records, options.loss, options.seed);
+    let objective =
+        Objective::new(space, records, options.loss, options.seed).with_gradient(options.gradient);
     if objective.pixel_count() == 0 {
         return Err(Error::argument(
             "photos",
@@ -320,6 +327,7 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
         loss,
         loss_kind: options.loss,
         optimizer: options.optimizer,
+        gradient: (options.optimizer == Optimizer::Lbfgs).then(|| objective.gradient_method()),
         iterations,
         evaluations,
         termination,
