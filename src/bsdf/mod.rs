@@ -26,6 +26,7 @@ pub mod heitz;
 pub mod kulla_conty;
 pub mod lobe_mixture;
 mod position_free;
+pub mod roulette;
 pub mod single;
 #[cfg(test)]
 pub(crate) mod testing;
@@ -121,6 +122,8 @@ pub fn differentiable<T: Real>(
         Model::FastMsx => Box::new(fast_msx::FastMsx { single }),
         Model::KullaConty => Box::new(kulla_conty::KullaConty::new(single)),
         Model::Turquin => Box::new(turquin::Turquin::new(single)),
+        Model::WangPt => Box::new(wang::Wang::new(single, wang::WangEstimator::PathTracing)),
+        Model::WangBdpt => Box::new(wang::Wang::new(single, wang::WangEstimator::Bidirectional)),
         _ => return None,
     })
 }
