@@ -122,6 +122,8 @@ pub fn differentiable<T: Real>(
         Model::FastMsx => Box::new(fast_msx::FastMsx { single }),
         Model::KullaConty => Box::new(kulla_conty::KullaConty::new(single)),
         Model::Turquin => Box::new(turquin::Turquin::new(single)),
+        Model::Bitterli => Box::new(bitterli::Bitterli::new(single.microfacet, single.fresnel)),
+        Model::Cui => Box::new(cui::Cui::new(single.microfacet, single.fresnel)),
         Model::WangPt => Box::new(wang::Wang::new(single, wang::WangEstimator::PathTracing)),
         Model::WangBdpt => Box::new(wang::Wang::new(single, wang::WangEstimator::Bidirectional)),
         _ => return None,

@@ -333,3 +333,13 @@ fn wang_pt_pathwise_gradient_matches_finite_differences() {
 fn wang_bdpt_pathwise_gradient_matches_finite_differences() {
     check_pathwise(Model::WangBdpt);
 }
+
+#[test]
+fn bitterli_pathwise_gradient_matches_finite_differences() {
+    check_pathwise(Model::Bitterli);
+}
+
+#[test]
+fn cui_pathwise_gradient_matches_finite_differences() {
+    check_pathwise(Model::Cui);
+}
