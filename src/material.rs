@@ -211,8 +211,11 @@ impl Material {
                 let single = self.single::<f64>();
                 Box::new(Heitz::new(single.microfacet, single.fresnel))
             }
-            Model::WangPt => Box::new(Wang::new(self.single(), WangEstimator::PathTracing)),
-            Model::WangBdpt => Box::new(Wang::new(self.single(), WangEstimator::Bidirectional)),
+            Model::WangPt => Box::new(Wang::new(self.single::<f64>(), WangEstimator::PathTracing)),
+            Model::WangBdpt => Box::new(Wang::new(
+                self.single::<f64>(),
+                WangEstimator::Bidirectional,
+            )),
         }
     }
 }

@@ -46,9 +46,9 @@ use super::position_free::{
     connect, mis_pdf, scatter, signed_lambda, survival, walk_sample, MAX_WALK_BOUNCES,
 };
 use super::single::SingleBounce;
-use super::{Brdf, BrdfSample, BrdfValue, Rng};
+use super::{Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
 use crate::microfacet::{Fresnel, Height, Microfacet};
-use crate::scalar::Vec3;
+use crate::scalar::{Real, Rgb, Vec3};
 use rand::Rng as _;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -63,23 +63,24 @@ pub const REL_TOL: f64 = 1e-7;
 const CAP: usize = MAX_CLOSED_FORM_BOUNCES + 2;
 
 /// The closed-form height distribution of Alg. 1 for the semi-infinite slab, with a running
-/// bound on the rounding error of every amplitude.
+/// bound on the rounding error of every amplitude (of the real parts: the bound decides between
+/// the closed form and the fallback, a decision fixed by the random numbers).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct HeightDistribution {
+pub(crate) struct HeightDistribution<T = f64> {
     n: usize,
-    a: [f64; CAP],
-    b: [f64; CAP],
+    a: [T; CAP],
+    b: [T; CAP],
     /// First-order bound on the absolute rounding error of `a[j]`.
     err: [f64; CAP],
 }
 
-impl HeightDistribution {
+impl<T: Real> HeightDistribution<T> {
     /// `h_1(z) = sigma0 exp(-sigma0 z)` for the entering direction of extinction `sigma0` (eq. 9).
-    pub(crate) fn new(sigma0: f64) -> Self {
+    pub(crate) fn new(sigma0: T) -> Self {
         let mut h = HeightDistribution {
             n: 1,
-            a: [0.0; CAP],
-            b: [0.0; CAP],
+            a: [T::zero(); CAP],
+            b: [T::zero(); CAP],
             err: [0.0; CAP],
         };
         h.a[0] = sigma0;
@@ -89,23 +90,23 @@ impl HeightDistribution {
 
     /// Add a segment with Cui's signed Lambda `s` (negative downward): eq. 17 downward, eq. 21
     /// upward. Returns `false` (leaving `self` unusable) when the arrays are full.
-    pub(crate) fn add(&mut self, s: f64) -> bool {
+    pub(crate) fn add(&mut self, s: T) -> bool {
         let eps = f64::EPSILON;
         let n = self.n;
-        if s < 0.0 {
+        if s.re64() < 0.0 {
             if n >= CAP {
                 return false;
             }
             let sigma = -s;
-            let (mut sum, mut sum_abs, mut sum_err) = (0.0, 0.0, 0.0);
+            let (mut sum, mut sum_abs, mut sum_err) = (T::zero(), 0.0, 0.0);
             for j in 0..n {
                 let f = sigma / (sigma - self.b[j]);
                 self.a[j] *= f;
                 // sigma and b[j] are exact inputs: the difference and the quotient round once
                 // each, the product once more.
-                self.err[j] = self.err[j] * f.abs() + 3.0 * eps * self.a[j].abs();
+                self.err[j] = self.err[j] * f.re64().abs() + 3.0 * eps * self.a[j].re64().abs();
                 sum += self.a[j];
-                sum_abs += self.a[j].abs();
+                sum_abs += self.a[j].re64().abs();
                 sum_err += self.err[j];
             }
             self.a[n] = -sum;
@@ -116,7 +117,7 @@ impl HeightDistribution {
             for j in 0..n {
                 let f = s / (s + self.b[j]);
                 self.a[j] *= f;
-                self.err[j] = self.err[j] * f + 3.0 * eps * self.a[j].abs();
+                self.err[j] = self.err[j] * f.re64() + 3.0 * eps * self.a[j].re64().abs();
             }
         }
         true
@@ -124,14 +125,15 @@ impl HeightDistribution {
 
     /// `sum_j a_j / (b_j + sigma)` with a bound on its rounding error: the exit probability
     /// along a direction of extinction `sigma` (eq. 22), or the mass for `sigma = 0`.
-    pub(crate) fn laplace(&self, sigma: f64) -> (f64, f64) {
+    pub(crate) fn laplace(&self, sigma: T) -> (T, f64) {
         let eps = f64::EPSILON;
-        let (mut sum, mut sum_abs, mut sum_err) = (0.0, 0.0, 0.0);
+        let (mut sum, mut sum_abs, mut sum_err) = (T::zero(), 0.0, 0.0);
         for j in 0..self.n {
-            let t = self.a[j] / (self.b[j] + sigma);
+            let den = self.b[j] + sigma;
+            let t = self.a[j] / den;
             sum += t;
-            sum_abs += t.abs();
-            sum_err += self.err[j] / (self.b[j] + sigma);
+            sum_abs += t.re64().abs();
+            sum_err += self.err[j] / den.re64();
         }
         (sum, sum_err + (self.n as f64 + 2.0) * eps * sum_abs)
     }
@@ -155,26 +157,28 @@ pub(crate) fn p_exit(lambdas: &[f64]) -> (f64, f64) {
 /// One segment of signed Lambda `s` from a collision at explicit depth `x`, forced to end in a
 /// collision: downward the depth grows by an exponential step; upward the step is drawn from
 /// the exponential truncated to `[0, x)` and the weight is multiplied by the probability
-/// `1 - exp(-sigma x)` that the photon collides before leaving. `u` is uniform in `[0, 1)`.
+/// `1 - exp(-sigma x)` that the photon collides before leaving. `u` is uniform in `[0, 1)`;
+/// both steps are smooth in `s` and `x` at fixed `u` (inverse-CDF sampling), so dual numbers
+/// carry their pathwise derivatives.
 #[inline]
-fn forced_step(x: f64, weight: f64, s: f64, u: f64) -> (f64, f64) {
-    if s < 0.0 {
-        (x - (-u).ln_1p() / -s, weight)
+fn forced_step<T: Real>(x: T, weight: T, s: T, u: f64) -> (T, T) {
+    if s.re64() < 0.0 {
+        (x - T::c((-u).ln_1p()) / -s, weight)
     } else {
         let p = -(-s * x).exp_m1();
-        if p.is_nan() || p <= 0.0 {
-            return (x, 0.0);
+        if p.re64().is_nan() || p.re64() <= 0.0 {
+            return (x, T::zero());
         }
-        let t = -(-u * p).ln_1p() / s;
-        ((x - t).max(0.0), weight * p)
+        let t = -(-p * T::c(u)).ln_1p() / s;
+        ((x - t).max_c(0.0), weight * p)
     }
 }
 
 /// Replay the directions (signed Lambdas) of a path with [`forced_step`]: an explicit depth of
 /// its last collision and a weight with `E[weight g(depth)] = integral h(z) g(z) dz` for the
 /// closed-form height distribution `h` of the same directions.
-fn explicit_depth(prefix: &[f64], rng: &mut Rng) -> (f64, f64) {
-    let (mut x, mut w) = (0.0, 1.0);
+fn explicit_depth<T: Real>(prefix: &[T], rng: &mut Rng) -> (T, T) {
+    let (mut x, mut w) = (T::zero(), T::one());
     for &s in prefix {
         (x, w) = forced_step(x, w, s, rng.random());
     }
@@ -183,25 +187,25 @@ fn explicit_depth(prefix: &[f64], rng: &mut Rng) -> (f64, f64) {
 
 /// Signed Lambdas of the directions of a walk, kept while the closed form is in use.
 #[derive(Clone, Copy)]
-struct Prefix {
+struct Prefix<T> {
     n: usize,
-    s: [f64; CAP],
+    s: [T; CAP],
 }
 
-impl Prefix {
-    fn new(s0: f64) -> Self {
+impl<T: Real> Prefix<T> {
+    fn new(s0: T) -> Self {
         let mut p = Prefix {
             n: 1,
-            s: [0.0; CAP],
+            s: [T::zero(); CAP],
         };
         p.s[0] = s0;
         p
     }
-    fn push(&mut self, s: f64) {
+    fn push(&mut self, s: T) {
         self.s[self.n] = s;
         self.n += 1;
     }
-    fn as_slice(&self) -> &[f64] {
+    fn as_slice(&self) -> &[T] {
         &self.s[..self.n]
     }
 }
@@ -211,28 +215,30 @@ impl Prefix {
 /// but one value lives on the stack of a walk.)
 #[derive(Clone, Copy)]
 #[allow(clippy::large_enum_variant)]
-enum Depth {
-    Closed(HeightDistribution),
-    Explicit { x: f64, weight: f64 },
+enum Depth<T> {
+    Closed(HeightDistribution<T>),
+    Explicit { x: T, weight: T },
 }
 
 /// A sampled exit: direction, weight per channel, number of reflections.
 type Exit = (Vec3<f64>, [f64; 3], u32);
 
-/// The `bitterli` model (see the module documentation).
+/// The `bitterli` model (see the module documentation). Generic over the scalar: `eval`'s walks
+/// take every random decision (roulette, fallback, forced depths) on real parts with
+/// parameter-free probabilities, so dual numbers carry unbiased pathwise derivatives.
 #[derive(Debug)]
-pub struct Bitterli {
+pub struct Bitterli<T = f64> {
     /// Exact single-bounce part, height-correlated.
-    pub single: SingleBounce<f64>,
+    pub single: SingleBounce<T>,
     /// The same surface with white Fresnel (for the MIS density).
-    white: SingleBounce<f64>,
+    white: SingleBounce<T>,
     max_closed_form: usize,
     fallbacks: AtomicU64,
     paths: AtomicU64,
 }
 
-impl Bitterli {
-    pub fn new(microfacet: Microfacet<f64>, fresnel: Fresnel<f64>) -> Self {
+impl<T: Real> Bitterli<T> {
+    pub fn new(microfacet: Microfacet<T>, fresnel: Fresnel<T>) -> Self {
         Bitterli {
             single: SingleBounce {
                 microfacet,
@@ -284,14 +290,14 @@ impl Bitterli {
     /// backward density `q(-wb -> -d_{k-1}) prod_{t>=1} q(-d_{t+1} -> -d_t)`; a step and its
     /// reverse share the half vector, so their ratio is `A(-d_t) / A(d_{t+1})` and
     /// `p_back / p_fwd = (D(h_{k-1}) / A(wb)) (A(wa) / D(h_0)) prod_{t=1}^{k-2} A(-d_t) / A(d_{t+1})`.
-    fn walk(&self, wa: Vec3<f64>, wb: Vec3<f64>, rng: &mut Rng) -> ([f64; 3], bool) {
+    fn walk(&self, wa: Vec3<T>, wb: Vec3<T>, rng: &mut Rng) -> ([T; 3], bool) {
         let mf = &self.single.microfacet;
         let fresnel = &self.single.fresnel;
-        let mut sum = [0.0; 3];
+        let mut sum = [T::zero(); 3];
         let d0 = -wa;
         let s0 = signed_lambda(mf, d0);
         let sb = signed_lambda(mf, wb);
-        if !s0.is_finite() || !sb.is_finite() {
+        if !s0.re64().is_finite() || !sb.re64().is_finite() {
             return (sum, false);
         }
         let area_a = mf.projected_area(wa);
@@ -299,8 +305,8 @@ impl Bitterli {
         let mut depth = Depth::Closed(HeightDistribution::new(-s0));
         let mut prefix = Prefix::new(s0);
         let mut fell_back = false;
-        let (mut d, mut beta) = (d0, [1.0; 3]);
-        let (mut d_first, mut ratio) = (0.0, 1.0);
+        let (mut d, mut beta) = (d0, [T::one(); 3]);
+        let (mut d_first, mut ratio) = (T::zero(), T::one());
         for bounce in 1..MAX_WALK_BOUNCES as usize {
             // Random decisions of this step.
             let u = [rng.random::<f64>(), rng.random::<f64>()];
@@ -309,7 +315,7 @@ impl Bitterli {
                 break;
             };
             let s = signed_lambda(mf, step.d);
-            if !s.is_finite() {
+            if !s.re64().is_finite() {
                 break;
             }
             if bounce == 1 {
@@ -341,9 +347,9 @@ impl Bitterli {
             // otherwise replay the directions with explicit depths.
             let (p_exit, mass) = match depth {
                 Depth::Closed(h) => {
-                    let (mass, mass_err) = h.laplace(0.0);
+                    let (mass, mass_err) = h.laplace(T::zero());
                     let (p, p_err) = h.laplace(sb);
-                    if mass_err <= REL_TOL * mass && p_err <= REL_TOL * p {
+                    if mass_err <= REL_TOL * mass.re64() && p_err <= REL_TOL * p.re64() {
                         (p, mass)
                     } else {
                         fell_back = true;
@@ -357,17 +363,21 @@ impl Bitterli {
             // Next-event estimation of the path of `bounce + 1` reflections.
             if let Some((h, c)) = connect(d, wb) {
                 let dh = mf.d(h);
-                let rho = dh / (4.0 * mf.projected_area(-d));
+                let rho = dh / (T::c(4.0) * mf.projected_area(-d));
                 let r = (dh / area_b) * (area_a / d_first) * ratio;
-                let mis = if r.is_finite() { 1.0 / (1.0 + r) } else { 0.0 };
+                let mis = if r.re64().is_finite() {
+                    (T::one() + r).recip()
+                } else {
+                    T::zero()
+                };
                 let f = fresnel.eval(c).0;
                 let common = rho * p_exit * mis;
-                if common > 0.0 && common.is_finite() {
+                if common.re64() > 0.0 && common.re64().is_finite() {
                     (0..3).for_each(|ch| sum[ch] += beta[ch] * f[ch] * common);
                 }
             }
             // Russian roulette.
-            let q = survival(&beta, mass);
+            let q = survival(beta.map(|b| b.re64()), mass.re64());
             if q <= 0.0 {
                 break;
             }
@@ -375,12 +385,44 @@ impl Bitterli {
                 if rng.random::<f64>() >= q {
                     break;
                 }
-                (0..3).for_each(|ch| beta[ch] /= q);
+                (0..3).for_each(|ch| beta[ch] /= T::c(q));
             }
         }
         (sum, fell_back)
     }
 
+    /// `(single, multi)` of `f(wi, wo)`: the exact single bounce and the balance-heuristic
+    /// combination of the walks from `wi` and from `wo`; zero unless both directions are above
+    /// the surface.
+    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
+        let zero = Rgb::splat(T::zero());
+        if wi.z.re64() <= 0.0 || wo.z.re64() <= 0.0 {
+            return (zero, zero);
+        }
+        let single = self.single.eval(wi, wo);
+        let (forward, fb_f) = self.walk(wi, wo, rng);
+        let (backward, fb_b) = self.walk(wo, wi, rng);
+        self.count(2, fb_f as u64 + fb_b as u64);
+        let multi = [0, 1, 2].map(|c| {
+            let v = forward[c] / wo.z + backward[c] / wi.z;
+            if v.re64().is_finite() {
+                v
+            } else {
+                T::zero()
+            }
+        });
+        (single, Rgb(multi))
+    }
+}
+
+impl<T: Real> ScalarBrdf<T> for Bitterli<T> {
+    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
+        let (single, multi) = self.eval_split(wi, wo, rng);
+        single + multi
+    }
+}
+
+impl Bitterli<f64> {
     /// The exact sampler: the walk of Alg. 3 that leaves along an upward direction with its
     /// exact conditional probability `P_exit(d0..dk) / (mass left)`. Returns the exit direction,
     /// the weight (product of Fresnel terms, times the fallback's weight) and the bounces.
@@ -474,24 +516,13 @@ impl Bitterli {
     }
 }
 
-impl Brdf for Bitterli {
+impl Brdf for Bitterli<f64> {
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return BrdfValue::default();
+        let (single, multi) = self.eval_split(wi, wo, rng);
+        BrdfValue {
+            single: single.0,
+            multi: multi.0,
         }
-        let single = self.single.eval(wi, wo).0;
-        let (forward, fb_f) = self.walk(wi, wo, rng);
-        let (backward, fb_b) = self.walk(wo, wi, rng);
-        self.count(2, fb_f as u64 + fb_b as u64);
-        let multi = [0, 1, 2].map(|c| {
-            let v = forward[c] / wo.z + backward[c] / wi.z;
-            if v.is_finite() {
-                v
-            } else {
-                0.0
-            }
-        });
-        BrdfValue { single, multi }
     }
 
     fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {

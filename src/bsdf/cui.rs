@@ -49,9 +49,9 @@ use super::position_free::{
     connect, mis_pdf, scatter, signed_lambda, survival, walk_sample, MAX_WALK_BOUNCES,
 };
 use super::single::SingleBounce;
-use super::{Brdf, BrdfSample, BrdfValue, Rng};
+use super::{Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
 use crate::microfacet::{Fresnel, Height, Microfacet};
-use crate::scalar::Vec3;
+use crate::scalar::{Real, Rgb, Vec3};
 use rand::Rng as _;
 
 /// The segment term `S_k(d0, ..., d_{k-1}, out)` of a growing path for any exit direction,
@@ -71,43 +71,43 @@ use rand::Rng as _;
 /// accumulation. Every quantity is a sum of positive terms: no cancellation, unlike the
 /// hyperexponential form, and `beta_j >= 1` bounds every factor by 1.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct SegmentTerm {
-    beta: Vec<f64>,
-    g: Vec<f64>,
-    constant: f64,
+pub(crate) struct SegmentTerm<T = f64> {
+    beta: Vec<T>,
+    g: Vec<T>,
+    constant: T,
 }
 
-impl SegmentTerm {
+impl<T: Real> SegmentTerm<T> {
     pub(crate) fn new() -> Self {
         SegmentTerm {
             beta: Vec::with_capacity(16),
             g: Vec::with_capacity(16),
-            constant: 1.0,
+            constant: T::one(),
         }
     }
 
     /// Add a direction by Cui's signed Lambda (`< 0` downward, the extinction is `|s|`).
-    pub(crate) fn add(&mut self, s: f64) {
-        if s < 0.0 {
+    pub(crate) fn add(&mut self, s: T) {
+        if s.re64() < 0.0 {
             self.beta.push(-s);
             self.g.push(self.constant);
         } else {
-            let mut acc = 0.0;
+            let mut acc = T::zero();
             for (g, beta) in self.g.iter_mut().zip(&self.beta) {
-                acc = (acc + *g) / (s + beta);
+                acc = (acc + *g) / (s + *beta);
                 *g = acc;
             }
         }
-        self.constant = 0.0;
+        self.constant = T::zero();
     }
 
     /// `H(sigma)`: the segment term of the path so far closed by an upward direction of
     /// extinction `sigma`; with `sigma = 0`, the mass of the depth distribution divided by
     /// `prod |Lambda|`.
-    pub(crate) fn eval(&self, sigma: f64) -> f64 {
-        let mut acc = 0.0;
+    pub(crate) fn eval(&self, sigma: T) -> T {
+        let mut acc = T::zero();
         for (g, beta) in self.g.iter().zip(&self.beta) {
-            acc = (acc + g) / (sigma + beta);
+            acc = (acc + *g) / (sigma + *beta);
         }
         self.constant + acc
     }
@@ -121,21 +121,23 @@ pub(crate) fn segment_term(lambdas: &[f64]) -> f64 {
     if lambdas[0] >= 0.0 || lambdas[k] < 0.0 {
         return 0.0;
     }
-    let mut s = SegmentTerm::new();
+    let mut s = SegmentTerm::<f64>::new();
     lambdas[..k].iter().for_each(|&l| s.add(l));
     s.eval(lambdas[k])
 }
 
-/// The `cui` model (see the module documentation).
+/// The `cui` model (see the module documentation), generic over the scalar: `eval`'s walk
+/// takes its random decisions on real parts with a piecewise-constant roulette
+/// ([`super::position_free::survival`]), so dual numbers carry unbiased pathwise derivatives.
 #[derive(Clone, Copy, Debug)]
-pub struct Cui {
+pub struct Cui<T = f64> {
     /// Exact single-bounce part, height-correlated.
-    pub single: SingleBounce<f64>,
-    white: SingleBounce<f64>,
+    pub single: SingleBounce<T>,
+    white: SingleBounce<T>,
 }
 
-impl Cui {
-    pub fn new(microfacet: Microfacet<f64>, fresnel: Fresnel<f64>) -> Self {
+impl<T: Real> Cui<T> {
+    pub fn new(microfacet: Microfacet<T>, fresnel: Fresnel<T>) -> Self {
         Cui {
             single: SingleBounce {
                 microfacet,
@@ -151,28 +153,28 @@ impl Cui {
     }
 
     /// Alg. 3 without its first term: an estimate of `f_multi(wi, wo) wo.z`.
-    fn walk(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> [f64; 3] {
+    fn walk(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> [T; 3] {
         let mf = &self.single.microfacet;
         let fresnel = &self.single.fresnel;
-        let mut sum = [0.0; 3];
+        let mut sum = [T::zero(); 3];
         let d0 = -wi;
         let s0 = signed_lambda(mf, d0);
         let so = signed_lambda(mf, wo);
-        if !s0.is_finite() || !so.is_finite() {
+        if !s0.re64().is_finite() || !so.re64().is_finite() {
             return sum;
         }
         let mut seg = SegmentTerm::new();
         seg.add(s0);
         // w = prod F, lambdas = prod |Lambda(d_t)| over the vertices left so far: together
         // prod v / pdf of the sampled steps.
-        let (mut d, mut s_d, mut w, mut lambdas) = (d0, s0, [1.0; 3], 1.0);
+        let (mut d, mut s_d, mut w, mut lambdas) = (d0, s0, [T::one(); 3], T::one());
         for _ in 1..MAX_WALK_BOUNCES {
             let u = [rng.random::<f64>(), rng.random::<f64>()];
             let Some(step) = scatter(mf, fresnel, d, u) else {
                 break;
             };
             let s = signed_lambda(mf, step.d);
-            if !s.is_finite() {
+            if !s.re64().is_finite() {
                 break;
             }
             (0..3).for_each(|c| w[c] *= step.fresnel[c]);
@@ -180,15 +182,16 @@ impl Cui {
             (d, s_d) = (step.d, s);
             seg.add(s);
             if let Some((h, c)) = connect(d, wo) {
-                let v = mf.d(h) / (4.0 * d.z.abs());
+                let v = mf.d(h) / (T::c(4.0) * d.z.abs());
                 let common = lambdas * v * seg.eval(so);
-                if common > 0.0 && common.is_finite() {
+                if common.re64() > 0.0 && common.re64().is_finite() {
                     let f = fresnel.eval(c).0;
                     (0..3).for_each(|ch| sum[ch] += w[ch] * f[ch] * common);
                 }
             }
             // Russian roulette from the energy left: mass = prod_{t<=i} |Lambda(d_t)| H(0).
-            let q = survival(&w, lambdas * s.abs() * seg.eval(0.0));
+            let mass = lambdas * s.abs() * seg.eval(T::zero());
+            let q = survival(w.map(|x| x.re64()), mass.re64());
             if q <= 0.0 {
                 break;
             }
@@ -196,12 +199,38 @@ impl Cui {
                 if rng.random::<f64>() >= q {
                     break;
                 }
-                (0..3).for_each(|ch| w[ch] /= q);
+                (0..3).for_each(|ch| w[ch] /= T::c(q));
             }
         }
         sum
     }
 
+    /// `(single, multi)` of `f(wi, wo)`; zero unless both directions are above the surface.
+    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
+        let zero = Rgb::splat(T::zero());
+        if wi.z.re64() <= 0.0 || wo.z.re64() <= 0.0 {
+            return (zero, zero);
+        }
+        let multi = self.walk(wi, wo, rng).map(|v| {
+            let f = v / wo.z;
+            if f.re64().is_finite() {
+                f
+            } else {
+                T::zero()
+            }
+        });
+        (self.single.eval(wi, wo), Rgb(multi))
+    }
+}
+
+impl<T: Real> ScalarBrdf<T> for Cui<T> {
+    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
+        let (single, multi) = self.eval_split(wi, wo, rng);
+        single + multi
+    }
+}
+
+impl Cui<f64> {
     /// Alg. 2: returns the exit direction, the weight and the number of bounces.
     fn sample_walk(
         &self,
@@ -249,22 +278,13 @@ impl Cui {
     }
 }
 
-impl Brdf for Cui {
+impl Brdf for Cui<f64> {
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return BrdfValue::default();
+        let (single, multi) = self.eval_split(wi, wo, rng);
+        BrdfValue {
+            single: single.0,
+            multi: multi.0,
         }
-        let single = self.single.eval(wi, wo).0;
-        let walk = self.walk(wi, wo, rng);
-        let multi = walk.map(|v| {
-            let f = v / wo.z;
-            if f.is_finite() {
-                f
-            } else {
-                0.0
-            }
-        });
-        BrdfValue { single, multi }
     }
 
     fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {

@@ -26,6 +26,7 @@
 
 use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
+use super::{Rng, ScalarBrdf};
 use crate::scalar::{Real, Rgb, Vec3};
 use std::f64::consts::PI;
 
@@ -74,6 +75,13 @@ impl<T: Real> FastMsx<T> {
     /// `(f_single, f_I)`.
     pub fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>) -> (Rgb<T>, Rgb<T>) {
         (self.single.eval(wi, wo), self.indirect(wi, wo))
+    }
+}
+
+impl<T: Real> ScalarBrdf<T> for FastMsx<T> {
+    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
+        let (single, indirect) = self.eval_split(wi, wo);
+        single + indirect
     }
 }
 

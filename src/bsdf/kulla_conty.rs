@@ -16,6 +16,7 @@
 use super::albedo_table::AlbedoTable;
 use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
+use super::{Rng, ScalarBrdf};
 use crate::scalar::{Real, Rgb, Vec3};
 
 /// 8-point Gauss-Legendre nodes and weights on [0, 1] (for `F_avg`).
@@ -72,6 +73,12 @@ impl<T: Real> KullaConty<T> {
         let lost_i = (T::one() - self.table.e(wi.z.re64(), self.alpha)).max_c(0.0);
         let lost_o = (T::one() - self.table.e(wo.z.re64(), self.alpha)).max_c(0.0);
         self.lobe_scale.scale(lost_i * lost_o)
+    }
+}
+
+impl<T: Real> ScalarBrdf<T> for KullaConty<T> {
+    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
+        self.single.eval(wi, wo) + self.compensation(wi, wo)
     }
 }
 

@@ -26,6 +26,7 @@ pub mod heitz;
 pub mod kulla_conty;
 pub mod lobe_mixture;
 mod position_free;
+pub mod roulette;
 pub mod single;
 #[cfg(test)]
 pub(crate) mod testing;
@@ -34,7 +35,7 @@ mod tests;
 pub mod turquin;
 pub mod wang;
 
-use crate::scalar::Vec3;
+use crate::scalar::{Real, Rgb, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// The random number generator every stochastic estimator draws from (deterministic per seed).
@@ -92,6 +93,41 @@ pub trait Brdf: Send + Sync {
     fn fallback_stats(&self) -> Option<(u64, u64)> {
         None
     }
+}
+
+/// The total value `f(wi, wo)` of a model at scalar type `T`: what the renderer needs. `f64`
+/// through any [`Brdf`] object; dual numbers (exact and pathwise derivatives for the fitter)
+/// through the models that are generic over the scalar ([`differentiable`]).
+pub trait ScalarBrdf<T>: Send + Sync {
+    /// `f(wi, wo)` in 1/sr, the single and multiple-bounce parts together; stochastic models
+    /// draw from `rng` exactly as [`Brdf::eval`] does, so every scalar type sees the same paths.
+    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T>;
+}
+
+impl ScalarBrdf<f64> for dyn Brdf {
+    #[inline]
+    fn eval_total(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> Rgb<f64> {
+        Rgb(self.eval(wi, wo, rng).total())
+    }
+}
+
+/// `model` built on `single` at scalar type `T`, for the models whose value is generic over
+/// the scalar; `None` for `heitz` (explicit heights: finite differences only).
+pub fn differentiable<T: Real>(
+    model: Model,
+    single: single::SingleBounce<T>,
+) -> Option<Box<dyn ScalarBrdf<T>>> {
+    Some(match model {
+        Model::Single => Box::new(single),
+        Model::FastMsx => Box::new(fast_msx::FastMsx { single }),
+        Model::KullaConty => Box::new(kulla_conty::KullaConty::new(single)),
+        Model::Turquin => Box::new(turquin::Turquin::new(single)),
+        Model::Bitterli => Box::new(bitterli::Bitterli::new(single.microfacet, single.fresnel)),
+        Model::Cui => Box::new(cui::Cui::new(single.microfacet, single.fresnel)),
+        Model::WangPt => Box::new(wang::Wang::new(single, wang::WangEstimator::PathTracing)),
+        Model::WangBdpt => Box::new(wang::Wang::new(single, wang::WangEstimator::Bidirectional)),
+        _ => return None,
+    })
 }
 
 /// The models the command line accepts (PHYSICS.md "Multi-bounce models").

@@ -14,10 +14,11 @@
 //!
 //! `A(w)` is [`Microfacet::projected_area`]; `A(-d) = |d.z| |Lambda(d)|` for every `d`.
 
+use super::roulette::piecewise_constant;
 use super::single::SingleBounce;
 use super::BrdfSample;
 use crate::microfacet::{Fresnel, Microfacet};
-use crate::scalar::Vec3;
+use crate::scalar::{Real, Vec3};
 use std::f64::consts::FRAC_1_PI;
 
 /// Safety cap on the number of reflections of one walk. A walk on a conservative surface leaves
@@ -29,10 +30,10 @@ pub(crate) const MAX_WALK_BOUNCES: u32 = 1024;
 /// `|Lambda(d)| = A(-d) / |d.z|` is the extinction per unit optical depth along `d`. Infinite for
 /// an exactly horizontal `d`.
 #[inline]
-pub(crate) fn signed_lambda(mf: &Microfacet<f64>, d: Vec3<f64>) -> f64 {
+pub(crate) fn signed_lambda<T: Real>(mf: &Microfacet<T>, d: Vec3<T>) -> T {
     let z = d.z.abs();
     let zl = mf.z_lambda(d);
-    if d.z > 0.0 {
+    if d.z.re64() > 0.0 {
         zl / z
     } else {
         -(z + zl) / z
@@ -42,26 +43,26 @@ pub(crate) fn signed_lambda(mf: &Microfacet<f64>, d: Vec3<f64>) -> f64 {
 /// One reflection of the walk: the next flow direction, the Fresnel factor of the reflection
 /// and the microfacet normal that produced it.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Scatter {
-    pub d: Vec3<f64>,
-    pub fresnel: [f64; 3],
-    pub m: Vec3<f64>,
+pub(crate) struct Scatter<T> {
+    pub d: Vec3<T>,
+    pub fresnel: [T; 3],
+    pub m: Vec3<T>,
 }
 
 /// Sample `d' ~ rho(d -> .) / F` exactly (visible normals of `-d`, which may point below the
 /// horizon, then mirror reflection). `rho / pdf = F`; `None` when the normal is not visible
-/// (a rounding corner).
+/// (a rounding corner). With dual numbers the direction carries its pathwise derivative.
 #[inline]
-pub(crate) fn scatter(
-    mf: &Microfacet<f64>,
-    fresnel: &Fresnel<f64>,
-    d: Vec3<f64>,
+pub(crate) fn scatter<T: Real>(
+    mf: &Microfacet<T>,
+    fresnel: &Fresnel<T>,
+    d: Vec3<T>,
     u: [f64; 2],
-) -> Option<Scatter> {
+) -> Option<Scatter<T>> {
     let w = -d;
     let m = mf.sample_visible(w, u);
     let c = w.dot(m);
-    if c <= 0.0 || !c.is_finite() {
+    if c.re64() <= 0.0 || !c.re64().is_finite() {
         return None;
     }
     let next = w.reflect(m).normalize();
@@ -76,15 +77,15 @@ pub(crate) fn scatter(
 /// the half vector `h = normalize(-d + out)` and the cosine `(-d).h`, when the reflection exists
 /// (`h` above the macro-surface and seen from `-d`).
 #[inline]
-pub(crate) fn connect(d: Vec3<f64>, out: Vec3<f64>) -> Option<(Vec3<f64>, f64)> {
+pub(crate) fn connect<T: Real>(d: Vec3<T>, out: Vec3<T>) -> Option<(Vec3<T>, T)> {
     let sum = out - d;
     let len = sum.length();
-    if len.is_nan() || len <= 1e-300 {
+    if len.re64().is_nan() || len.re64() <= 1e-300 {
         return None;
     }
-    let h = sum * (1.0 / len);
+    let h = sum * len.recip();
     let c = -d.dot(h);
-    if h.z <= 0.0 || c <= 0.0 {
+    if h.z.re64() <= 0.0 || c.re64() <= 0.0 {
         return None;
     }
     Some((h, c))
@@ -92,17 +93,15 @@ pub(crate) fn connect(d: Vec3<f64>, out: Vec3<f64>) -> Option<(Vec3<f64>, f64)> 
 
 /// Russian roulette from the energy still in the surface (Bitterli & d'Eon 2022 sec. 6.1.3):
 /// survive with probability `min(1, max(throughput) * mass)`, where `mass` is the probability
-/// that the next collision happens. With white Fresnel this kills a walk with the conditional
-/// probability that the analog photon had left, so the surviving weight stays near 1.
+/// that the next collision happens, rounded down to four significant bits so that it is
+/// piecewise constant in the parameters ([`super::roulette`]: unbiased pathwise derivatives).
+/// With white Fresnel this kills a walk with nearly the conditional probability that the
+/// analog photon had left, so the surviving weight stays near 1. Takes real parts: the
+/// decision is fixed by the random numbers.
 #[inline]
-pub(crate) fn survival(throughput: &[f64; 3], mass: f64) -> f64 {
+pub(crate) fn survival(throughput: [f64; 3], mass: f64) -> f64 {
     let t = throughput[0].max(throughput[1]).max(throughput[2]);
-    let q = t * mass;
-    if q.is_nan() {
-        0.0
-    } else {
-        q.min(1.0)
-    }
+    piecewise_constant(t * mass)
 }
 
 /// Density reported with a sampled direction for multiple importance sampling (approximate):

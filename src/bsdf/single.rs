@@ -14,7 +14,7 @@
 //! [`Microfacet::g2_over_cosines`] so it stays finite at grazing angles. Sampling draws `h` from
 //! the visible normals of `wi` (Heitz 2018), with weight `F G2 / G1(wi)`.
 
-use super::{Brdf, BrdfSample, BrdfValue, Rng};
+use super::{Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
 use crate::microfacet::{Fresnel, Height, Microfacet};
 use crate::scalar::{Real, Rgb, Vec3};
 
@@ -64,6 +64,13 @@ impl<T: Real> SingleBounce<T> {
         }
         let h = (wi + wo).normalize();
         self.microfacet.pdf_visible(wi, h) / (T::c(4.0) * wo.dot(h))
+    }
+}
+
+impl<T: Real> ScalarBrdf<T> for SingleBounce<T> {
+    #[inline]
+    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
+        self.eval(wi, wo)
     }
 }
 

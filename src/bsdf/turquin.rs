@@ -16,6 +16,7 @@
 use super::albedo_table::AlbedoTable;
 use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
+use super::{Rng, ScalarBrdf};
 use crate::scalar::{Real, Rgb, Vec3};
 
 #[derive(Clone, Copy)]
@@ -46,6 +47,13 @@ impl<T: Real> Turquin<T> {
         let gain = (T::one() - e).max_c(0.0) / e;
         let f0 = self.single.fresnel.f0();
         (single, single * f0.scale(gain))
+    }
+}
+
+impl<T: Real> ScalarBrdf<T> for Turquin<T> {
+    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
+        let (single, added) = self.eval_split(wi, wo);
+        single + added
     }
 }
 

@@ -68,11 +68,14 @@
 //! `pf = D(h_j) / (4 A(-d_j))` and, walking from the camera side, of `d_j` at vertex `j`,
 //! `pb = D(h_j) / (4 A(d_{j+1}))`.
 //!
-//! Both walks are analog: past a segment `d_m` a walk goes on with its continuation probability
-//! `e_m` (the segment term read as a probability, in the walk's own orientation) and stops
-//! otherwise, which is the paper's Russian roulette (sec. 4.1, Arvo and Kirk 1990) with the
-//! survival probability the physics provides; a walk from `wi` then carries only the Fresnel
-//! factors.
+//! Both walks are nearly analog: past a segment `d_m` a walk goes on with its continuation
+//! probability `e_m` (the segment term read as a probability, in the walk's own orientation)
+//! rounded down to four significant bits, `q_m`, and stops otherwise, which is the paper's
+//! Russian roulette (sec. 4.1, Arvo and Kirk 1990) with the survival probability the physics
+//! provides; a walk from `wi` then carries the Fresnel factors and the ratios `e_m / q_m` (in
+//! [1, 1.0625)). The rounding makes the decision probability piecewise constant in the
+//! parameters, so the estimators are generic over the scalar and dual numbers give unbiased
+//! pathwise derivatives at fixed random numbers ([`super::roulette`]).
 //!
 //! - **PT** (eq. 25-26): one walk from `wi`; at every vertex `b_m`, `m >= 1`, a next-event
 //!   connection to `wo` closes a path of `m + 1` bounces, evaluated with the junction's vertex,
@@ -86,14 +89,15 @@
 //!   consistent: the camera-side throughput is the physical path contribution over the camera
 //!   walk's density, not that walk's own analog weight.
 //!
-//! The densities in the MIS weights include the walks' survival probabilities (the camera walk's
-//! `e` of a direction differs from the light walk's for the correlated model, and depends on the
-//! next direction), so that each strategy's density is the one it actually samples with (any
-//! weights summing to one would be unbiased; the balance heuristic is near-optimal only with the
-//! true densities).
+//! The densities in the MIS weights include the walks' survival probabilities `e` (the camera
+//! walk's `e` of a direction differs from the light walk's for the correlated model, and depends
+//! on the next direction), so that each strategy's density is within 6.25% of the one it
+//! actually samples with (any weights summing to one would be unbiased; the balance heuristic is
+//! near-optimal only with the true densities).
 
+use super::roulette::piecewise_constant;
 use super::single::SingleBounce;
-use super::{Brdf, BrdfSample, BrdfValue, Rng};
+use super::{Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
 use crate::microfacet::{Height, Microfacet, NdfKind};
 use crate::scalar::{Real, Rgb, Vec3};
 use rand::Rng as _;
@@ -115,9 +119,9 @@ pub enum WangEstimator {
 
 /// The position-free multiple-bounce BRDF (`wang-pt` / `wang-bdpt`).
 #[derive(Clone, Copy, Debug)]
-pub struct Wang {
+pub struct Wang<T = f64> {
     /// Microsurface, Fresnel and height model; also the exact single-bounce term.
-    pub surface: SingleBounce<f64>,
+    pub surface: SingleBounce<T>,
     pub estimator: WangEstimator,
 }
 
@@ -244,58 +248,60 @@ pub fn vertex<T: Real>(surface: &SingleBounce<T>, w: Vec3<T>, d: Vec3<T>) -> Opt
 }
 
 // ---------------------------------------------------------------------------------------------
-// Estimators (f64; random decisions drawn here, weights from the pieces above).
+// Estimators, generic over the scalar: random decisions are taken on real parts with
+// parameter-free (piecewise constant) probabilities, weights from the pieces above, so dual
+// numbers carry pathwise derivatives (module `roulette`).
 // ---------------------------------------------------------------------------------------------
 
 /// Multiply two non-negative factors of an MIS ratio, saturating instead of overflowing.
 #[inline]
-fn mul_sat(a: f64, b: f64) -> f64 {
+fn mul_sat<T: Real>(a: T, b: T) -> T {
     const BIG: f64 = 1e300;
-    (a.min(BIG) * b.min(BIG)).min(BIG)
+    (a.min_c(BIG) * b.min_c(BIG)).min_c(BIG)
 }
 
 /// Multiply a throughput by a Fresnel triple, channel by channel.
 #[inline]
-fn scale(v: &mut [f64; 3], f: [f64; 3]) {
+fn scale<T: Real>(v: &mut [T; 3], f: [T; 3]) {
     v.iter_mut().zip(f).for_each(|(a, b)| *a *= b);
 }
 
 /// `a / b` for non-negative densities, saturating (and 1 for 0 / 0).
 #[inline]
-fn ratio_sat(a: f64, b: f64) -> f64 {
-    if b > 0.0 {
-        (a / b).min(1e300)
-    } else if a > 0.0 {
-        1e300
+fn ratio_sat<T: Real>(a: T, b: T) -> T {
+    if b.re64() > 0.0 {
+        (a / b).min_c(1e300)
+    } else if a.re64() > 0.0 {
+        T::c(1e300)
     } else {
-        1.0
+        T::one()
     }
 }
 
 /// One vertex of a BDPT sub-path: the walk direction `x_m` (in that walk's own flow convention:
 /// `x_0 = -start`, `x_{m+1}` = reflection of `-x_m`).
 #[derive(Clone, Copy, Debug)]
-struct Node {
-    x: Vec3<f64>,
+struct Node<T> {
+    x: Vec3<T>,
     /// Connection throughput of the prefix `x_0..x_m` (see [`Wang::subpath`]).
-    beta: [f64; 3],
+    beta: [T; 3],
     /// `A(-x_m)`: normaliser of the visible normals seen from `-x_m` (the walk's own sampling).
-    area_in: f64,
+    area_in: T,
     /// `e` of the segment `x_m` in this walk's orientation: the probability with which the walk
     /// goes on to sample `x_{m+1}` (1 at `m = 0`).
-    cont: f64,
+    cont: T,
     /// Density with which this walk sampled `x_m` (m >= 1), survival of `x_{m-1}` included.
-    pdf_own: f64,
+    pdf_own: T,
     /// `D(h_{m-1}) / (4 A(x_m))`: the solid-angle density with which the other walk samples
     /// `x_{m-1}` at the same vertex (m >= 1), before its survival probability.
-    geo_rev: f64,
+    geo_rev: T,
     /// Running MIS sum `P(m-2)` (m >= 2): `P(k) = r_k (1 + P(k-1))`, `P(0) = 0`, with
     /// `r_k = p_other(x_k) / p_own(x_k)` the density ratio of direction `x_k`.
-    mis: f64,
+    mis: T,
 }
 
-impl Wang {
-    pub fn new(surface: SingleBounce<f64>, estimator: WangEstimator) -> Self {
+impl<T: Real> Wang<T> {
+    pub fn new(surface: SingleBounce<T>, estimator: WangEstimator) -> Self {
         Wang { surface, estimator }
     }
 
@@ -303,40 +309,45 @@ impl Wang {
         self.surface.height
     }
 
-    /// The analog walk's survival: continue past a segment with its continuation probability.
+    /// A walk's survival past a segment of continuation `cont`: with probability
+    /// `q = piecewise_constant(cont)` (`cont` rounded down to four significant bits, see
+    /// [`super::roulette`]); returns `q` when the walk goes on. The caller weights the survival
+    /// by `cont / q` (within 6.25% of the analog walk's 1).
     #[inline]
-    fn survives(cont: f64, rng: &mut Rng) -> bool {
-        cont >= 1.0 || (cont > 0.0 && rng.random::<f64>() < cont)
+    fn survives(cont: T, rng: &mut Rng) -> Option<f64> {
+        let q = piecewise_constant(cont.re64());
+        (q >= 1.0 || (q > 0.0 && rng.random::<f64>() < q)).then_some(q)
     }
 
     /// Sample the next direction of a walk whose current direction is `x` (light arriving at the
     /// next vertex along `x`). Returns `(next, F, D(h)/4)`.
     #[inline]
-    fn scatter(&self, x: Vec3<f64>, rng: &mut Rng) -> Option<(Vec3<f64>, Rgb<f64>, f64)> {
+    fn scatter(&self, x: Vec3<T>, rng: &mut Rng) -> Option<(Vec3<T>, Rgb<T>, T)> {
         let mf = &self.surface.microfacet;
         let w = -x;
-        if mf.projected_area(w) <= 0.0 {
+        if mf.projected_area(w).re64() <= 0.0 {
             return None;
         }
         let u = [rng.random::<f64>(), rng.random::<f64>()];
         let h = mf.sample_visible(w, u);
         let next = w.reflect(h);
         let len = next.length();
-        if len.is_nan() || len <= 0.0 || !len.is_finite() {
+        if len.re64().is_nan() || len.re64() <= 0.0 || !len.re64().is_finite() {
             return None;
         }
-        let d4 = mf.d(h) * 0.25;
+        let d4 = mf.d(h) * T::c(0.25);
         Some((next * len.recip(), self.surface.fresnel.eval(w.dot(h)), d4))
     }
 
-    /// PT estimate of the >= 2-bounce part of `f(wi, wo)` (eq. 25): an analog walk from `wi`
-    /// (survival with probability `e_m` past each segment, so the throughput is the product of
-    /// the Fresnel terms) with a next-event connection to `wo` at every vertex `b_m`, `m >= 1`.
-    fn multi_pt(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> [f64; 3] {
+    /// PT estimate of the >= 2-bounce part of `f(wi, wo)` (eq. 25): a walk from `wi` that goes
+    /// on past each segment with (nearly) its continuation probability `e_m`, weighted by
+    /// `e_m / q` ([`Wang::survives`]), so the throughput is the product of the Fresnel terms
+    /// times those ratios, with a next-event connection to `wo` at every vertex `b_m`, `m >= 1`.
+    fn multi_pt(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> [T; 3] {
         let mf = &self.surface.microfacet;
         let height = self.height();
-        let mut sum = [0.0; 3];
-        let mut beta = [1.0; 3];
+        let mut sum = [T::zero(); 3];
+        let mut beta = [T::one(); 3];
         let Some((mut d, f, _)) = self.scatter(-wi, rng) else {
             return sum;
         };
@@ -351,50 +362,62 @@ impl Wang {
                     *s += b * f * c;
                 }
             }
-            if !Self::survives(seg.cont, rng) {
+            let Some(q) = Self::survives(seg.cont, rng) else {
                 break;
-            }
+            };
             let Some((next, f, _)) = self.scatter(d, rng) else {
                 break;
             };
-            scale(&mut beta, f.0);
+            let survival = seg.cont / T::c(q);
+            scale(&mut beta, f.0.map(|f| f * survival));
             prev = d;
             d = next;
         }
-        sum.map(|v| if v.is_finite() && v > 0.0 { v } else { 0.0 })
+        sum.map(|v| {
+            if v.re64().is_finite() && v.re64() > 0.0 {
+                v
+            } else {
+                T::zero()
+            }
+        })
     }
 
-    /// A BDPT sub-path from `start` (`wi` for the light side, `wo` for the camera side), an
-    /// analog walk like PT's.
+    /// A BDPT sub-path from `start` (`wi` for the light side, `wo` for the camera side), a walk
+    /// like PT's.
     ///
-    /// Light side: `beta(m) = prod_{j<m} F_j * K(x_{m-1}, x_m)` (`1 / A(wi)` at `m = 0`): the path
-    /// contribution over the density of the prefix, including the segment of its last direction.
+    /// Light side: `beta(m) = prod_{j<m} F_j (e_j / q_j) * K(x_{m-1}, x_m)` (`1 / A(wi)` at
+    /// `m = 0`): the path contribution over the density of the prefix, including the segment of
+    /// its last direction.
     ///
     /// Camera side (`x_m = -d_{n-m}`): `beta(0) = 1`, `beta(m+1) = beta(m) F_m A(-x_m) *
-    /// [X(-x_1, wo) / wo.z if m = 0, else K(-x_{m+1}, -x_m)] / e_walk(x_m)`: the vertex terms over
+    /// [X(-x_1, wo) / wo.z if m = 0, else K(-x_{m+1}, -x_m)] / q_walk(x_m)`: the vertex terms over
     /// their backward densities and the segments of `d_{n-m+1} .. d_n`, evaluated in the
     /// physical (light-to-camera) orientation; the segment of the last direction depends on the
     /// light side and is evaluated at the connection.
-    fn subpath(&self, start: Vec3<f64>, camera_side: bool, rng: &mut Rng) -> Vec<Node> {
+    fn subpath(&self, start: Vec3<T>, camera_side: bool, rng: &mut Rng) -> Vec<Node<T>> {
         let mf = &self.surface.microfacet;
         let height = self.height();
         let a0 = mf.projected_area(start);
         let mut nodes = Vec::with_capacity(8);
         nodes.push(Node {
             x: -start,
-            beta: if camera_side { [1.0; 3] } else { [1.0 / a0; 3] },
+            beta: if camera_side {
+                [T::one(); 3]
+            } else {
+                [a0.recip(); 3]
+            },
             area_in: a0,
-            cont: 1.0,
-            pdf_own: 0.0,
-            geo_rev: 0.0,
-            mis: 0.0,
+            cont: T::one(),
+            pdf_own: T::zero(),
+            geo_rev: T::zero(),
+            mis: T::zero(),
         });
-        let mut fresnel = [1.0; 3];
+        let mut fresnel = [T::one(); 3];
         for m in 0..MAX_SAMPLED {
             let node = nodes[m];
-            if !Self::survives(node.cont, rng) {
+            let Some(q) = Self::survives(node.cont, rng) else {
                 break;
-            }
+            };
             let Some((next, f, d4)) = self.scatter(node.x, rng) else {
                 break;
             };
@@ -404,22 +427,23 @@ impl Wang {
             let mis = match rev {
                 Some(rev) if m >= 2 => {
                     let r = ratio_sat(rev.cont * node.geo_rev, nodes[m - 1].pdf_own);
-                    mul_sat(r, 1.0 + node.mis)
+                    mul_sat(r, T::one() + node.mis)
                 }
-                _ => 0.0,
+                _ => T::zero(),
             };
             let beta = if camera_side {
                 let seg = match rev {
                     Some(rev) => rev.kernel,
                     None => exit_over_cos(mf, height, -next, start),
                 };
-                let s = node.area_in * seg / node.cont;
+                let s = node.area_in * seg / T::c(q);
                 [0, 1, 2].map(|ch| node.beta[ch] * f.0[ch] * s)
             } else {
-                scale(&mut fresnel, f.0);
+                let survival = node.cont / T::c(q);
+                scale(&mut fresnel, f.0.map(|f| f * survival));
                 fresnel.map(|p| p * own.kernel)
             };
-            if !beta.iter().all(|b| b.is_finite()) {
+            if !beta.iter().all(|b| b.re64().is_finite()) {
                 break;
             }
             nodes.push(Node {
@@ -441,10 +465,10 @@ impl Wang {
     /// junction's `D(h) / 4`, `e_back` the other walk's continuation of the segment `-x_k` after
     /// its own last direction (needed when `k >= 2`).
     #[inline]
-    fn mis_side(own: &[Node], other: &Node, d4: f64, e_back: impl FnOnce() -> f64) -> f64 {
+    fn mis_side(own: &[Node<T>], other: &Node<T>, d4: T, e_back: impl FnOnce() -> T) -> T {
         let k = own.len() - 1;
         if k == 0 {
-            return 0.0;
+            return T::zero();
         }
         let last = &own[k];
         // Density with which the other walk would sample x_k at the junction.
@@ -453,16 +477,16 @@ impl Wang {
             return r_k;
         }
         let r_prev = ratio_sat(e_back() * last.geo_rev, own[k - 1].pdf_own);
-        mul_sat(r_k, 1.0 + mul_sat(r_prev, 1.0 + last.mis))
+        mul_sat(r_k, T::one() + mul_sat(r_prev, T::one() + last.mis))
     }
 
     /// BDPT estimate of the >= 2-bounce part of `f(wi, wo)` (eq. 29).
-    fn multi_bdpt(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> [f64; 3] {
+    fn multi_bdpt(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> [T; 3] {
         let mf = &self.surface.microfacet;
         let height = self.height();
         let light = self.subpath(wi, false, rng);
         let camera = self.subpath(wo, true, rng);
-        let mut sum = [0.0; 3];
+        let mut sum = [T::zero(); 3];
         for a in 0..light.len() {
             let lf = &light[a];
             for c in 0..camera.len() {
@@ -482,11 +506,12 @@ impl Wang {
                 let left = Self::mis_side(&light[..=a], cm, d4, || {
                     segment(mf, height, cm.x, -lf.x).cont
                 });
-                let right = Self::mis_side(&camera[..=c], lf, d4, || fwd.map_or(1.0, |s| s.cont));
-                let s = d4 * seg / (1.0 + left + right);
+                let right =
+                    Self::mis_side(&camera[..=c], lf, d4, || fwd.map_or(T::one(), |s| s.cont));
+                let s = d4 * seg / (T::one() + left + right);
                 for (ch, acc) in sum.iter_mut().enumerate() {
                     let v = lf.beta[ch] * cm.beta[ch] * f.0[ch] * s;
-                    if v.is_finite() && v > 0.0 {
+                    if v.re64().is_finite() && v.re64() > 0.0 {
                         *acc += v;
                     }
                 }
@@ -495,6 +520,29 @@ impl Wang {
         sum
     }
 
+    /// `(single, multi)` of `f(wi, wo)`: the exact single bounce and the estimate of longer
+    /// paths; zero unless both directions are above the surface.
+    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
+        let zero = Rgb::splat(T::zero());
+        if wi.z.re64() <= 0.0 || wo.z.re64() <= 0.0 {
+            return (zero, zero);
+        }
+        let multi = match self.estimator {
+            WangEstimator::PathTracing => self.multi_pt(wi, wo, rng),
+            WangEstimator::Bidirectional => self.multi_bdpt(wi, wo, rng),
+        };
+        (self.surface.eval(wi, wo), Rgb(multi))
+    }
+}
+
+impl<T: Real> ScalarBrdf<T> for Wang<T> {
+    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
+        let (single, multi) = self.eval_split(wi, wo, rng);
+        single + multi
+    }
+}
+
+impl Wang<f64> {
     /// First-bounce exit mass of the white walk, `E1 = integral D_wi(h) X(-wi, d(h)) dh` over
     /// the normals whose reflection `d` leaves upward. Only used by the approximate
     /// [`Brdf::pdf`], so it is a cheap fixed quadrature that needs no sampler: in the stretched
@@ -545,18 +593,12 @@ impl Wang {
     }
 }
 
-impl Brdf for Wang {
+impl Brdf for Wang<f64> {
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return BrdfValue::default();
-        }
-        let multi = match self.estimator {
-            WangEstimator::PathTracing => self.multi_pt(wi, wo, rng),
-            WangEstimator::Bidirectional => self.multi_bdpt(wi, wo, rng),
-        };
+        let (single, multi) = self.eval_split(wi, wo, rng);
         BrdfValue {
-            single: SingleBounce::eval(&self.surface, wi, wo).0,
-            multi,
+            single: single.0,
+            multi: multi.0,
         }
     }
 

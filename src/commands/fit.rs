@@ -6,6 +6,7 @@ use super::output::{check_overwrite, StagedFolder};
 use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
+use crate::fit::objective::GradientMethod;
 use crate::fit::params::{FresnelFamily, ParamSpace};
 use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
@@ -51,6 +52,10 @@ pub struct FitArgs {
     pub height: Height,
     #[arg(long, value_enum, default_value = "l2")]
     pub loss: LossKind,
+    /// L-BFGS gradients: exact (dual numbers; pathwise for the position-free stochastic
+    /// models) where the model allows, finite differences otherwise (heitz); or always fd.
+    #[arg(long, value_enum, default_value = "exact")]
+    pub gradient: GradientMethod,
     /// Stratified sub-pixel samples per pixel (a perfect square).
     #[arg(long, default_value_t = 4)]
     pub pixel_samples: usize,
@@ -128,6 +133,7 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
             },
             optimizer: args.optimizer,
             loss: args.loss,
+            gradient: args.gradient,
             max_iters: args.max_iters,
             seed: args.seed,
             progress: !args.quiet,

@@ -6,7 +6,9 @@
 //!    loss allow it, else a roughness scan, or a particle swarm (`--optimizer pso`); plus seeded
 //!    random starts (`--starts`).
 //! 3. Local search ([`local`]) over all free coordinates of the [`ParamSpace`] from each start:
-//!    L-BFGS (More-Thuente) or Nelder-Mead, chosen per model by [`Optimizer::local`].
+//!    L-BFGS (More-Thuente) or Nelder-Mead, chosen per model by [`Optimizer::local`]; L-BFGS on
+//!    exact dual-number gradients where the model allows, central finite differences otherwise
+//!    or on request ([`objective::GradientMethod`]).
 //! 4. Report: the material, loss, per-photo losses, every start's result, the optimiser trace,
 //!    evaluation counts and timings, in the fit file format of DESIGN.md.
 
@@ -26,7 +28,7 @@ use crate::shading::ShadingRecords;
 use argmin::core::Error as ArgminError;
 pub use local::TracePoint;
 use local::{LocalOptimizer, Recorder};
-use objective::Objective;
+use objective::{GradientMethod, Objective};
 use params::ParamSpace;
 use projection::Projection;
 use serde::{Deserialize, Serialize};
@@ -66,6 +68,8 @@ pub struct FitOptions {
     pub space: ParamSpace,
     pub optimizer: Optimizer,
     pub loss: LossKind,
+    /// How L-BFGS gets its gradients (exact where the model allows).
+    pub gradient: GradientMethod,
     pub max_iters: u64,
     pub seed: u64,
     /// Show a progress bar (or plain progress lines when stderr is not a terminal).
@@ -114,6 +118,9 @@ pub struct ModelFit {
     pub loss: f64,
     pub loss_kind: LossKind,
     pub optimizer: Optimizer,
+    /// The gradient L-BFGS used (`None` for Nelder-Mead, which needs none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gradient: Option<GradientMethod>,
     pub iterations: u64,
     /// Objective evaluations, projected solves' renders included.
     pub evaluations: usize,
@@ -191,7 +198,8 @@ fn fit_level(
     progress: bool,
 ) -> Result<ModelFit> {
     let space = options.space;
-    let objective = Objective::new(space, records, options.loss, options.seed);
+    let objective =
+        Objective::new(space, records, options.loss, options.seed).with_gradient(options.gradient);
     if objective.pixel_count() == 0 {
         return Err(Error::argument(
             "photos",
@@ -279,6 +287,7 @@ fn fit_level(
         loss,
         loss_kind: options.loss,
         optimizer: options.optimizer,
+        gradient: (local == LocalOptimizer::Lbfgs).then(|| objective.gradient_method()),
         iterations,
         evaluations,
         termination,

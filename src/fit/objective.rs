@@ -1,22 +1,45 @@
 //! The objective of a fit: image loss of the rendered prediction against the photos, as a
-//! function of the unbounded coordinates of a [`ParamSpace`], with central finite-difference
-//! gradients at a relative step.
+//! function of the unbounded coordinates of a [`ParamSpace`], and its gradient.
+//!
+//! | `--gradient` | how | cost |
+//! | --- | --- | --- |
+//! | `exact` (default) | one pass of the renderer in forward-mode dual numbers `DualSVec64<N>` (all `N` partial derivatives at once), chained with `d loss / d prediction` ([`Loss::gradient`]); exact for the analytic models, pathwise at fixed random numbers for the position-free stochastic ones | one evaluation at ~`N`-wide arithmetic |
+//! | `fd` | central differences at relative step [`FD_STEP`] | `2 N` evaluations |
+//!
+//! Models whose value is not generic over the scalar (`heitz`) fall back to `fd`.
 //!
 //! Only pixels with positive weight are rendered. Stochastic models draw from the per-pixel
 //! random streams of a fixed seed (common random numbers), so the objective is a deterministic
 //! function of the coordinates and differences and line searches see a smooth surface.
 
 use super::params::ParamSpace;
+use crate::bsdf::differentiable;
 use crate::loss::{ImageLayout, Loss, LossKind};
-use crate::render::render_pixels;
+use crate::render::{render_model, render_pixels};
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
+use num_dual::DualSVec64;
+use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// Relative step of the central differences (in unbounded coordinates): truncation error
 /// ~h^2 = 1e-10, rounding error ~eps/h = 1e-11 relative to the cost.
 const FD_STEP: f64 = 1e-5;
+
+/// Largest dimension of the dual-number path (anisotropic conductor with diffuse: 2 + 6 + 3).
+const MAX_EXACT_DIM: usize = 11;
+
+/// How the objective's gradient is computed (see the module table).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum GradientMethod {
+    /// Forward-mode dual numbers where the model allows, central differences otherwise.
+    #[default]
+    Exact,
+    /// Central finite differences with common random numbers.
+    Fd,
+}
 
 pub struct Objective<'a> {
     pub space: ParamSpace,
@@ -28,6 +51,7 @@ pub struct Objective<'a> {
     layout: ImageLayout,
     kind: LossKind,
     seed: u64,
+    gradient: GradientMethod,
     /// The loss is divided by this, so optimiser tolerances are relative (L2: mean target^2).
     scale: f64,
     pub evaluations: Arc<AtomicUsize>,
@@ -65,9 +89,31 @@ impl<'a> Objective<'a> {
             layout,
             kind,
             seed,
+            gradient: GradientMethod::Exact,
             scale,
             evaluations: Arc::new(AtomicUsize::new(0)),
             best: Mutex::new((f64::INFINITY, Vec::new())),
+        }
+    }
+
+    /// The same objective with gradients computed by `method` (default: exact where available).
+    pub fn with_gradient(mut self, method: GradientMethod) -> Self {
+        self.gradient = method;
+        self
+    }
+
+    /// The method [`Gradient::gradient`] uses: `Exact` only when requested and the model and
+    /// dimension have a dual-number path.
+    pub fn gradient_method(&self) -> GradientMethod {
+        let dim = self.space.dim();
+        let exact = self.gradient == GradientMethod::Exact
+            && (1..=MAX_EXACT_DIM).contains(&dim)
+            && differentiable(self.space.model, self.space.surface(&vec![0.0; dim]).single)
+                .is_some();
+        if exact {
+            GradientMethod::Exact
+        } else {
+            GradientMethod::Fd
         }
     }
 
@@ -135,14 +181,74 @@ impl<'a> Objective<'a> {
     }
 
     fn normalised_cost(&self, x: &[f64]) -> f64 {
+        self.record(x, self.loss(x) / self.scale)
+    }
+
+    /// Count an evaluation of the normalised `cost` at `x` and keep the best point.
+    fn record(&self, x: &[f64], cost: f64) -> f64 {
         self.evaluations.fetch_add(1, Ordering::Relaxed);
-        let cost = self.loss(x) / self.scale;
         let cost = if cost.is_finite() { cost } else { f64::MAX };
         let mut best = self.best.lock().expect("no panics while holding the lock");
         if cost < best.0 {
             *best = (cost, x.to_vec());
         }
         cost
+    }
+
+    /// Normalised cost and its exact gradient at `x` in one dual-number pass, `None` when the
+    /// model or the dimension has no dual path. The one match over the dimension picks the
+    /// width of the dual numbers.
+    pub fn exact_cost_and_gradient(&self, x: &[f64]) -> Option<(f64, Vec<f64>)> {
+        let (loss, gradient) = match x.len() {
+            1 => self.dual_pass::<1>(x),
+            2 => self.dual_pass::<2>(x),
+            3 => self.dual_pass::<3>(x),
+            4 => self.dual_pass::<4>(x),
+            5 => self.dual_pass::<5>(x),
+            6 => self.dual_pass::<6>(x),
+            7 => self.dual_pass::<7>(x),
+            8 => self.dual_pass::<8>(x),
+            9 => self.dual_pass::<9>(x),
+            10 => self.dual_pass::<10>(x),
+            11 => self.dual_pass::<11>(x),
+            _ => None,
+        }?;
+        let cost = self.record(x, loss / self.scale);
+        Some((cost, gradient.iter().map(|g| g / self.scale).collect()))
+    }
+
+    /// Loss and its gradient at `x` with `N` = `x.len()` dual directions: the coordinates are
+    /// seeded with unit derivative vectors, the renderer carries them to every pixel, and the
+    /// chain rule sums `d loss / d p . d p / d x` over pixels and channels.
+    fn dual_pass<const N: usize>(&self, x: &[f64]) -> Option<(f64, Vec<f64>)> {
+        let coords: Vec<DualSVec64<N>> = x
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| DualSVec64::from_re(v).derivative(i))
+            .collect();
+        let surface = self.space.surface(&coords);
+        let brdf = differentiable(self.space.model, surface.single)?;
+        let predicted = render_model(
+            brdf.as_ref(),
+            surface.diffuse,
+            self.records,
+            &self.pixels,
+            self.seed,
+        );
+        let values: Vec<[f64; 3]> = predicted.iter().map(|p| p.map(|v| v.re)).collect();
+        let loss = self.image_loss();
+        let mut gradient = vec![0.0; N];
+        for (p, dl) in predicted.iter().zip(loss.gradient(&values)) {
+            for c in 0..3 {
+                if let Some(dp) = &p[c].eps.0 {
+                    gradient
+                        .iter_mut()
+                        .zip(dp.iter())
+                        .for_each(|(g, d)| *g += dl[c] * d);
+                }
+            }
+        }
+        Some((loss.value(&values), gradient))
     }
 
     /// Undo the normalisation of a cost reported by the optimiser.
@@ -162,10 +268,24 @@ impl CostFunction for &Objective<'_> {
 impl Gradient for &Objective<'_> {
     type Param = Vec<f64>;
     type Gradient = Vec<f64>;
-    /// Central differences with step `FD_STEP * max(1, |x_i|)`.
+    /// Exact (dual numbers) when [`Objective::gradient_method`] says so, otherwise central
+    /// differences with step `FD_STEP * max(1, |x_i|)`.
     fn gradient(&self, x: &Vec<f64>) -> Result<Vec<f64>, ArgminError> {
-        let mut probe = x.clone();
-        Ok((0..x.len())
+        if self.gradient == GradientMethod::Exact {
+            if let Some((_, gradient)) = self.exact_cost_and_gradient(x) {
+                return Ok(gradient);
+            }
+        }
+        Ok(self.fd_gradient(x))
+    }
+}
+
+impl Objective<'_> {
+    /// Central differences of the normalised cost with step `FD_STEP * max(1, |x_i|)`, at the
+    /// same random numbers for both probes.
+    pub fn fd_gradient(&self, x: &[f64]) -> Vec<f64> {
+        let mut probe = x.to_vec();
+        (0..x.len())
             .map(|i| {
                 let h = FD_STEP * x[i].abs().max(1.0);
                 probe[i] = x[i] + h;
@@ -175,6 +295,9 @@ impl Gradient for &Objective<'_> {
                 probe[i] = x[i];
                 (plus - minus) / (2.0 * h)
             })
-            .collect())
+            .collect()
     }
 }
+
+#[cfg(test)]
+mod tests;

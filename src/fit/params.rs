@@ -12,12 +12,14 @@
 //! directly (a co-located flash sees the Fresnel term only at normal incidence), while eta and k
 //! alone are strongly correlated; g is then pinned by whatever range of angles the photos span.
 
+use crate::bsdf::single::SingleBounce;
 use crate::bsdf::Model;
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::fresnel::{
     ior_from_reflectivity_edge_tint, reflectivity_edge_tint_from_ior,
 };
-use crate::microfacet::{Height, NdfKind};
+use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
+use crate::scalar::{Real, Rgb};
 use serde::{Deserialize, Serialize};
 
 /// Which Fresnel family a fit searches.
@@ -42,15 +44,29 @@ pub struct ParamSpace {
     pub diffuse: bool,
 }
 
-/// Logistic function, kept away from exactly 0 and 1.
-pub fn sigmoid(x: f64) -> f64 {
-    (1.0 / (1.0 + (-x).exp())).clamp(1e-12, 1.0 - 1e-12)
+/// Logistic function, kept away from exactly 0 and 1; generic so coordinates may carry
+/// derivatives (the clamp keeps the derivative of the unclamped branch).
+pub fn sigmoid<T: Real>(x: T) -> T {
+    (T::one() + (-x).exp())
+        .recip()
+        .max_c(1e-12)
+        .min_c(1.0 - 1e-12)
 }
 
 /// Inverse of [`sigmoid`] for `p` in (0, 1).
 pub fn logit(p: f64) -> f64 {
     let p = p.clamp(1e-12, 1.0 - 1e-12);
     (p / (1.0 - p)).ln()
+}
+
+/// The material at a point of a [`ParamSpace`] in the kernel's generic pieces: what both the
+/// f64 renderer and the dual-number gradient evaluate.
+#[derive(Clone, Copy, Debug)]
+pub struct Surface<T> {
+    /// Roughness, Fresnel and height model of the specular part.
+    pub single: SingleBounce<T>,
+    /// Lambertian albedo per channel.
+    pub diffuse: [T; 3],
 }
 
 impl ParamSpace {
@@ -84,18 +100,19 @@ impl ParamSpace {
         names
     }
 
-    /// The material at coordinates `x`.
-    pub fn material(&self, x: &[f64]) -> Material {
+    /// The surface at coordinates `x`, at any scalar type.
+    pub fn surface<T: Real>(&self, x: &[T]) -> Surface<T> {
         debug_assert_eq!(x.len(), self.dim());
-        let (alpha, rest) = if self.anisotropic {
-            ([x[0].exp(), x[1].exp()], &x[2..])
+        let (ax, ay, rest) = if self.anisotropic {
+            (x[0].exp(), x[1].exp(), &x[2..])
         } else {
-            ([x[0].exp(); 2], &x[1..])
+            let a = x[0].exp();
+            (a, a, &x[1..])
         };
         let (fresnel, rest) = match self.fresnel {
             FresnelFamily::Schlick => (
-                FresnelSpec::Schlick {
-                    f0: [0, 1, 2].map(|c| sigmoid(rest[c])),
+                Fresnel::Schlick {
+                    f0: Rgb([0, 1, 2].map(|c| sigmoid(rest[c]))),
                 },
                 &rest[3..],
             ),
@@ -104,9 +121,9 @@ impl ParamSpace {
                     ior_from_reflectivity_edge_tint(sigmoid(rest[c]), sigmoid(rest[3 + c]))
                 });
                 (
-                    FresnelSpec::Conductor {
-                        eta: ior.map(|p| p.0),
-                        k: ior.map(|p| p.1),
+                    Fresnel::Conductor {
+                        eta: Rgb(ior.map(|p| p.0)),
+                        k: Rgb(ior.map(|p| p.1)),
                     },
                     &rest[6..],
                 )
@@ -115,13 +132,33 @@ impl ParamSpace {
         let diffuse = if self.diffuse {
             [0, 1, 2].map(|c| sigmoid(rest[c]))
         } else {
-            [0.0; 3]
+            [T::zero(); 3]
+        };
+        Surface {
+            single: SingleBounce {
+                microfacet: Microfacet::new(self.ndf, ax, ay),
+                fresnel,
+                height: self.height,
+            },
+            diffuse,
+        }
+    }
+
+    /// The material at coordinates `x`.
+    pub fn material(&self, x: &[f64]) -> Material {
+        let Surface { single, diffuse } = self.surface(x);
+        let fresnel = match single.fresnel {
+            Fresnel::Schlick { f0 } => FresnelSpec::Schlick { f0: f0.0 },
+            Fresnel::Conductor { eta, k } => FresnelSpec::Conductor { eta: eta.0, k: k.0 },
+            Fresnel::White | Fresnel::Dielectric { .. } => {
+                unreachable!("a fit searches Schlick or conductor Fresnel")
+            }
         };
         Material {
             model: self.model,
             ndf: self.ndf,
             height: self.height,
-            alpha,
+            alpha: [single.microfacet.ax, single.microfacet.ay],
             fresnel,
             diffuse,
         }

@@ -88,15 +88,17 @@ pub fn conductor_f0(eta: f64, k: f64) -> f64 {
 /// `(eta, k)` with normal reflectivity `r` in [0, 1) and edge tint `g` in [0, 1].
 /// `eta = g n_min + (1 - g) n_max` with `n_min = (1 - r) / (1 + r)`,
 /// `n_max = (1 + sqrt r) / (1 - sqrt r)`, and `k = sqrt((r (eta + 1)^2 - (eta - 1)^2) / (1 - r))`.
-pub fn ior_from_reflectivity_edge_tint(r: f64, g: f64) -> (f64, f64) {
-    let r = r.clamp(0.0, 1.0 - 1e-12);
-    let g = g.clamp(0.0, 1.0);
-    let n_min = (1.0 - r) / (1.0 + r);
+/// Generic over the scalar, so the fitter differentiates through it exactly.
+pub fn ior_from_reflectivity_edge_tint<T: Real>(r: T, g: T) -> (T, T) {
+    let one = T::one();
+    let r = r.max_c(0.0).min_c(1.0 - 1e-12);
+    let g = g.max_c(0.0).min_c(1.0);
+    let n_min = (one - r) / (one + r);
     let sr = r.sqrt();
-    let n_max = (1.0 + sr) / (1.0 - sr);
-    let eta = g * n_min + (1.0 - g) * n_max;
-    let k2 = (r * (eta + 1.0).powi(2) - (eta - 1.0).powi(2)) / (1.0 - r);
-    (eta, k2.max(0.0).sqrt())
+    let n_max = (one + sr) / (one - sr);
+    let eta = g * n_min + (one - g) * n_max;
+    let k2 = (r * (eta + one).sq() - (eta - one).sq()) / (one - r);
+    (eta, k2.max_c(0.0).sqrt())
 }
 
 /// Inverse of [`ior_from_reflectivity_edge_tint`]: `r = F0(eta, k)`,
@@ -129,6 +131,16 @@ mod tests {
         ] {
             let (r, g) = reflectivity_edge_tint_from_ior(eta, k);
             let (eta2, k2) = ior_from_reflectivity_edge_tint(r, g);
+            // The dual derivatives match central differences of the f64 map.
+            let (de, dk) = ior_from_reflectivity_edge_tint(
+                num_dual::Dual64::from_re(r).derivative(),
+                num_dual::Dual64::from_re(g),
+            );
+            let h = 1e-6;
+            let (ep, kp) = ior_from_reflectivity_edge_tint(r + h, g);
+            let (em, km) = ior_from_reflectivity_edge_tint(r - h, g);
+            assert!((de.eps - (ep - em) / (2.0 * h)).abs() < 1e-5 * de.eps.abs().max(1.0));
+            assert!((dk.eps - (kp - km) / (2.0 * h)).abs() < 1e-5 * dk.eps.abs().max(1.0));
             assert!(
                 (eta - eta2).abs() < 1e-9 && (k - k2).abs() < 1e-9,
                 "{eta},{k} -> {r},{g} -> {eta2},{k2}"
