@@ -29,7 +29,7 @@
 //! `float_roundtrip`).
 
 use super::laplace::Laplace;
-use super::log_posterior::{self, LogPosterior, Noise};
+use super::log_posterior::{self, LogPosterior, Noise, Reading};
 use super::params::ParamSpace;
 use super::posterior::{summarise, Posterior, RunFacts};
 use super::sampler::{self, Candidate, ChainState, Schedule, Target};
@@ -98,7 +98,11 @@ struct Checkpoint {
 }
 
 /// FNV-1a over the likelihood data and the options that shape the run.
-fn fingerprint(records: &ShadingRecords, candidates: &[ParamSpace], options: &McmcOptions) -> String {
+fn fingerprint(
+    records: &ShadingRecords,
+    candidates: &[ParamSpace],
+    options: &McmcOptions,
+) -> String {
     let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
     let mut eat = |bits: u64| {
         for byte in bits.to_le_bytes() {
@@ -150,6 +154,12 @@ fn validate(candidates: &[ParamSpace], options: &McmcOptions) -> Result<()> {
             ));
         }
     }
+    if Reading::of(options.loss).is_none() {
+        return Err(Error::argument(
+            "--loss",
+            "ssim is not the likelihood of any noise; use l2, relative-l2 or log-l1 with --mcmc",
+        ));
+    }
     if options.resume && options.checkpoint.is_none() {
         return Err(Error::argument("--resume", "needs a checkpoint file"));
     }
@@ -200,13 +210,15 @@ fn prepare(
         })
         .collect::<Result<Vec<_>>>()?;
     let map_seconds = started.elapsed().as_secs_f64();
+    let reading = Reading::of(options.loss).expect("validated");
     let noise = match options.noise_sigma {
         Some(sigma) => Noise {
-            reading: log_posterior::Reading::of(options.loss),
+            reading,
             sigma,
             estimated: false,
         },
         None => Noise::estimate(
+            reading,
             options.loss,
             maps.iter().map(|m| m.loss).fold(f64::INFINITY, f64::min),
             log_posterior::rms_target(records),
@@ -216,13 +228,8 @@ fn prepare(
         .iter()
         .zip(&maps)
         .map(|(&space, map)| {
-            let target = LogPosterior::new(
-                space,
-                records,
-                options.loss,
-                options.schedule.seed,
-                noise,
-            );
+            let target =
+                LogPosterior::new(space, records, options.loss, options.schedule.seed, noise);
             Laplace::at_mode(&target, &space.point(&map.material))
         })
         .collect();
@@ -302,11 +309,8 @@ pub fn sample_posterior(
         options.stop_after.unwrap_or(u64::MAX),
         |states| {
             if let Some(p) = &mut progress {
-                let rate = states
-                    .iter()
-                    .map(|s| s.step[s.model])
-                    .sum::<f64>()
-                    / states.len() as f64;
+                let rate =
+                    states.iter().map(|s| s.step[s.model]).sum::<f64>() / states.len() as f64;
                 p.update(states[0].iterations, || format!("mean step {rate:.3}"));
             }
             if last_write.elapsed().as_secs_f64() >= CHECKPOINT_SECONDS {
