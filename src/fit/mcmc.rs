@@ -143,8 +143,9 @@ fn validate(candidates: &[ParamSpace], options: &McmcOptions) -> Result<()> {
     if options.schedule.chains == 0 {
         return Err(Error::argument("--chains", "must be at least 1"));
     }
-    if options.schedule.samples < 4 {
-        return Err(Error::argument("--mcmc-samples", "must be at least 4"));
+    if options.schedule.samples < 8 {
+        // Split chains need 4 draws per half for the ESS.
+        return Err(Error::argument("--mcmc-samples", "must be at least 8"));
     }
     if let Some(s) = options.noise_sigma {
         if !(s.is_finite() && s > 0.0) {
@@ -181,6 +182,9 @@ fn load_checkpoint(path: &PathBuf, fingerprint: &str) -> Result<Checkpoint> {
 }
 
 fn save_checkpoint(path: &PathBuf, checkpoint: &Checkpoint) -> Result<()> {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+    }
     crate::capture::atomic_file::write_atomically(path, |w| {
         serde_json::to_writer(&mut *w, checkpoint).map_err(|e| Error::io(path, e))
     })

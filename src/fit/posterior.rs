@@ -109,7 +109,9 @@ pub fn candidate_label(spaces: &[ParamSpace], index: usize) -> String {
 }
 
 /// Material parameters of a draw, by file name: (name, one value or three channels).
-fn named_values(spaces: &[ParamSpace], draw: &Draw) -> Vec<(&'static str, Vec<f64>)> {
+type NamedValues = Vec<(&'static str, Vec<f64>)>;
+
+fn named_values(spaces: &[ParamSpace], draw: &Draw) -> NamedValues {
     let space = spaces[draw.model];
     let material = space.material(&draw.x);
     let mut values = if space.anisotropic {
@@ -166,7 +168,7 @@ fn summarise_params(
     };
     let mut out = BTreeMap::new();
     let names = named_values(spaces, first);
-    let per_draw: Vec<Vec<Vec<(&str, Vec<f64>)>>> = chains
+    let per_draw: Vec<Vec<NamedValues>> = chains
         .iter()
         .map(|c| c.iter().map(|d| named_values(spaces, d)).collect())
         .collect();
@@ -247,9 +249,12 @@ pub fn summarise(spaces: &[ParamSpace], states: &[ChainState], facts: RunFacts) 
         let count: usize = own.iter().map(Vec::len).sum();
         let probability = count as f64 / samples.max(1) as f64;
         *models.entry(space.model.name().to_string()).or_insert(0.0) += probability;
-        *laplace_models
-            .entry(space.model.name().to_string())
-            .or_insert(0.0) += (facts.log_evidence[index] - top).exp() / evidence_sum;
+        // A MAP outside the priors' support has no Laplace evidence; then no model has one.
+        if top.is_finite() {
+            *laplace_models
+                .entry(space.model.name().to_string())
+                .or_insert(0.0) += (facts.log_evidence[index] - top).exp() / evidence_sum;
+        }
         if space.diffuse {
             diffuse_share += probability;
         }
@@ -299,6 +304,95 @@ pub fn summarise(spaces: &[ParamSpace], states: &[ChainState], facts: RunFacts) 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bsdf::Model;
+    use crate::fit::log_posterior::Reading;
+    use crate::fit::params::logit;
+    use crate::microfacet::{Height, NdfKind};
+
+    #[test]
+    fn diffuse_choice_is_pooled_by_model_name_and_reported_as_a_probability() {
+        let space = |model, diffuse| ParamSpace {
+            model,
+            ndf: NdfKind::Ggx,
+            height: Height::Correlated,
+            anisotropic: false,
+            fresnel: FresnelFamily::Schlick,
+            diffuse,
+        };
+        let spaces = [
+            space(Model::Single, false),
+            space(Model::Single, true),
+            space(Model::KullaConty, false),
+        ];
+        let plain = |model, alpha: f64| Draw {
+            model,
+            x: vec![alpha.ln(), logit(0.5), logit(0.5), logit(0.5)],
+        };
+        let with_diffuse = Draw {
+            model: 1,
+            x: vec![
+                0.2f64.ln(),
+                logit(0.5),
+                logit(0.5),
+                logit(0.5),
+                logit(0.4),
+                logit(0.4),
+                logit(0.4),
+            ],
+        };
+        // Two chains of 16 draws: half single, a quarter single+diffuse, a quarter kulla-conty.
+        let pattern = [plain(0, 0.1), plain(0, 0.3), with_diffuse, plain(2, 0.2)];
+        let chain: Vec<Draw> = (0..4).flat_map(|_| pattern.clone()).collect();
+        let chains = [chain.clone(), chain];
+        let states: Vec<ChainState> = chains
+            .into_iter()
+            .map(|draws| ChainState {
+                model: 0,
+                x: draws[0].x.clone(),
+                log_density: 0.0,
+                gradient: None,
+                step: vec![1.0; 3],
+                adapted: vec![0; 3],
+                within: Counts::default(),
+                between: Counts::default(),
+                iterations: 16,
+                draws,
+            })
+            .collect();
+        let noise = Noise {
+            reading: Reading::Gaussian,
+            sigma: 0.1,
+            estimated: true,
+        };
+        let facts = RunFacts {
+            sampler: "test",
+            warmup: 0,
+            kept: 16,
+            noise,
+            pixels: 1,
+            log_evidence: vec![0.0, 0.0, 2.0f64.ln()],
+            map_seconds: 0.0,
+            seconds: 1.0,
+        };
+        let p = summarise(&spaces, &states, facts);
+        assert_eq!(p.models["single"], 0.75);
+        assert_eq!(p.models["kulla-conty"], 0.25);
+        assert_eq!(p.diffuse_probability, Some(0.25));
+        assert_eq!(p.per_model["single+diffuse"].samples, 8);
+        assert!((p.laplace_models["kulla-conty"] - 0.5).abs() < 1e-12);
+        let ParamSummary::Scalar(alpha) = &p.params["alpha"] else {
+            panic!()
+        };
+        assert!((alpha.mean - 0.2).abs() < 1e-12);
+        let ParamSummary::Channels(diffuse) = &p.params["diffuse"] else {
+            panic!()
+        };
+        assert!((diffuse.mean[0] - 0.1).abs() < 1e-9, "{:?}", diffuse.mean);
+        assert_eq!(p.samples, 32);
+        // The JSON round trip keeps scalars and channels apart.
+        let json = serde_json::to_string(&p).unwrap();
+        assert_eq!(serde_json::from_str::<Posterior>(&json).unwrap(), p);
+    }
 
     #[test]
     fn type_7_quantiles_interpolate_between_order_statistics() {

@@ -16,6 +16,13 @@
 //! time-homogeneous chain. Starting `h = 1` (optimal for a perfectly preconditioned Gaussian is
 //! about `1.65 d^-1/6`).
 //!
+//! Why MALA rather than HMC: with finite-difference gradients a gradient costs `2d` image
+//! evaluations, so a MALA iteration costs `2d + 1` and an HMC trajectory of `L` leapfrog steps
+//! `L (2d + 1)`. Preconditioned by the Laplace covariance, the posteriors here are close to
+//! Gaussian and MALA already keeps 0.38 effective draws per draw (copper-flash: bulk ESS 768 of
+//! 2000 draws, acceptance 0.55); HMC cannot exceed about 1 per draw, so with `L >= 3` it would
+//! give fewer effective draws per second. (Not measured with an HMC implementation.)
+//!
 //! Random numbers: iteration `i` of chain `c` draws from its own stream
 //! `rng_stream(seed, c 2^40 + i)`, so the chain state alone (no generator state) determines the
 //! rest of the run, and a run resumed from a checkpoint repeats an uninterrupted one exactly.
