@@ -167,13 +167,20 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
             diffuse: args.diffuse,
         })
         .collect();
+    if spaces.is_empty() {
+        return Err(Error::argument("--models", "no model given"));
+    }
     let checkpoint = args
         .mcmc
         .checkpoint
         .clone()
         .unwrap_or_else(|| output.with_extension("mcmc-checkpoint.json"));
     let run = if args.mcmc.mcmc {
-        match sample_posterior(&records, &spaces, &mcmc_options(args, checkpoint.clone()))? {
+        match sample_posterior(
+            &records,
+            &spaces,
+            &mcmc_options(args, &spaces, checkpoint.clone()),
+        )? {
             Some(run) => Some(run),
             None => {
                 eprintln!(
@@ -192,18 +199,7 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
     };
     for &space in spaces.iter().skip(fits.len()) {
         let model = space.model;
-        let options = FitOptions {
-            space,
-            optimizer: args.optimizer,
-            loss: args.loss,
-            max_iters: args.max_iters,
-            seed: args.seed,
-            progress: !args.quiet,
-            starts: args.starts,
-            projection: !args.no_projection,
-            pyramid: args.pyramid,
-        };
-        let fit = fit_model(&records, &options)?;
+        let fit = fit_model(&records, &fit_options(args, space))?;
         if !args.quiet {
             eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
         }
@@ -272,11 +268,23 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
     Ok(())
 }
 
-fn mcmc_options(args: &FitArgs, checkpoint: PathBuf) -> McmcOptions {
-    McmcOptions {
-        loss: args.loss,
+fn fit_options(args: &FitArgs, space: ParamSpace) -> FitOptions {
+    FitOptions {
+        space,
         optimizer: args.optimizer,
+        loss: args.loss,
         max_iters: args.max_iters,
+        seed: args.seed,
+        progress: !args.quiet,
+        starts: args.starts,
+        projection: !args.no_projection,
+        pyramid: args.pyramid,
+    }
+}
+
+fn mcmc_options(args: &FitArgs, spaces: &[ParamSpace], checkpoint: PathBuf) -> McmcOptions {
+    McmcOptions {
+        map: fit_options(args, spaces[0]),
         schedule: Schedule {
             chains: args.mcmc.chains,
             warmup: args.mcmc.mcmc_warmup,
@@ -288,6 +296,5 @@ fn mcmc_options(args: &FitArgs, checkpoint: PathBuf) -> McmcOptions {
         checkpoint: Some(checkpoint),
         resume: args.mcmc.resume,
         stop_after: args.mcmc.mcmc_stop_after,
-        progress: !args.quiet,
     }
 }

@@ -33,9 +33,8 @@ use super::log_posterior::{self, LogPosterior, Noise, Reading};
 use super::params::ParamSpace;
 use super::posterior::{summarise, Posterior, RunFacts};
 use super::sampler::{self, Candidate, ChainState, Schedule, Target};
-use super::{fit_model, FitOptions, ModelFit, Optimizer};
+use super::{fit_model, FitOptions, ModelFit};
 use crate::error::{Error, Result};
-use crate::loss::LossKind;
 use crate::progress::Progress;
 use crate::shading::ShadingRecords;
 use serde::{Deserialize, Serialize};
@@ -54,9 +53,9 @@ pub const SAMPLER: &str = "preconditioned MALA + Laplace-matched between-model j
 /// Everything `--mcmc` needs besides the records and the candidates.
 #[derive(Clone, Debug)]
 pub struct McmcOptions {
-    pub loss: LossKind,
-    pub optimizer: Optimizer,
-    pub max_iters: u64,
+    /// How the MAP starts are fitted (its `space` is replaced by each candidate's); its loss is
+    /// the likelihood's and its `progress` the sampler's.
+    pub map: FitOptions,
     pub schedule: Schedule,
     pub noise_sigma: Option<f64>,
     /// Pixels in the likelihood (0: all).
@@ -65,7 +64,6 @@ pub struct McmcOptions {
     pub resume: bool,
     /// Stop (and checkpoint) after this many iterations per chain: for testing resumption.
     pub stop_after: Option<u64>,
-    pub progress: bool,
 }
 
 /// A finished run: the posterior and the MAP fits it started from.
@@ -116,11 +114,15 @@ fn fingerprint(
     for s in &records.irradiance {
         s.iter().for_each(|v| eat(v.to_bits()));
     }
+    let map = &options.map;
     format!(
-        "{hash:016x} {candidates:?} {:?} {:?} {} {:?} {:?} {}",
-        options.loss,
-        options.optimizer,
-        options.max_iters,
+        "{hash:016x} {candidates:?} {:?} {:?} {} {} {} {} {:?} {:?} {}",
+        map.loss,
+        map.optimizer,
+        map.max_iters,
+        map.starts,
+        map.projection,
+        map.pyramid,
         options.schedule,
         options.noise_sigma,
         options.pixels
@@ -155,7 +157,7 @@ fn validate(candidates: &[ParamSpace], options: &McmcOptions) -> Result<()> {
             ));
         }
     }
-    if Reading::of(options.loss).is_none() {
+    if Reading::of(options.map.loss).is_none() {
         return Err(Error::argument(
             "--loss",
             "ssim is not the likelihood of any noise; use l2, relative-l2 or log-l1 with --mcmc",
@@ -204,17 +206,13 @@ fn prepare(
                 records,
                 &FitOptions {
                     space,
-                    optimizer: options.optimizer,
-                    loss: options.loss,
-                    max_iters: options.max_iters,
-                    seed: options.schedule.seed,
-                    progress: options.progress,
+                    ..options.map.clone()
                 },
             )
         })
         .collect::<Result<Vec<_>>>()?;
     let map_seconds = started.elapsed().as_secs_f64();
-    let reading = Reading::of(options.loss).expect("validated");
+    let reading = Reading::of(options.map.loss).expect("validated");
     let noise = match options.noise_sigma {
         Some(sigma) => Noise {
             reading,
@@ -223,7 +221,7 @@ fn prepare(
         },
         None => Noise::estimate(
             reading,
-            options.loss,
+            options.map.loss,
             maps.iter().map(|m| m.loss).fold(f64::INFINITY, f64::min),
             log_posterior::rms_target(records),
         ),
@@ -232,8 +230,13 @@ fn prepare(
         .iter()
         .zip(&maps)
         .map(|(&space, map)| {
-            let target =
-                LogPosterior::new(space, records, options.loss, options.schedule.seed, noise);
+            let target = LogPosterior::new(
+                space,
+                records,
+                options.map.loss,
+                options.schedule.seed,
+                noise,
+            );
             Laplace::at_mode(&target, &space.point(&map.material))
         })
         .collect();
@@ -272,7 +275,7 @@ pub fn sample_posterior(
     let started = Instant::now();
     let targets: Vec<LogPosterior> = candidates
         .iter()
-        .map(|&space| LogPosterior::new(space, &data, options.loss, schedule.seed, setup.noise))
+        .map(|&space| LogPosterior::new(space, &data, options.map.loss, schedule.seed, setup.noise))
         .collect();
     let chain_candidates: Vec<Candidate> = targets
         .iter()
@@ -302,6 +305,7 @@ pub fn sample_posterior(
         }
     };
     let mut progress = options
+        .map
         .progress
         .then(|| Progress::new("mcmc", schedule.total()));
     let mut last_write = Instant::now();
