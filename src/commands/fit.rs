@@ -6,8 +6,11 @@ use super::output::{check_overwrite, StagedFolder};
 use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
+use crate::fit::mcmc::{sample_posterior, McmcOptions};
 use crate::fit::objective::GradientMethod;
 use crate::fit::params::{FresnelFamily, ParamSpace};
+use crate::fit::posterior::Posterior;
+use crate::fit::sampler::Schedule;
 use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
 use crate::microfacet::{Height, NdfKind};
@@ -73,6 +76,41 @@ pub struct FitArgs {
     /// No progress display.
     #[arg(long)]
     pub quiet: bool,
+    #[command(flatten)]
+    pub mcmc: McmcArgs,
+}
+
+/// `--mcmc` and its options (see `bouncefit::fit::mcmc`).
+#[derive(clap::Args, Debug)]
+pub struct McmcArgs {
+    /// Sample the Bayesian posterior over parameters and models; the fit file gains `posterior`.
+    #[arg(long)]
+    pub mcmc: bool,
+    /// Independent chains.
+    #[arg(long, default_value_t = 4)]
+    pub chains: usize,
+    /// Kept iterations per chain.
+    #[arg(long, default_value_t = 500)]
+    pub mcmc_samples: u64,
+    /// Warm-up iterations per chain (step-size adaptation, discarded).
+    #[arg(long, default_value_t = 200)]
+    pub mcmc_warmup: u64,
+    /// Pixels in the likelihood, a seeded random subset (0: all); intervals widen by about
+    /// sqrt(all pixels / this).
+    #[arg(long, default_value_t = 4096)]
+    pub mcmc_pixels: usize,
+    /// Noise level of the likelihood in loss units (default: estimated from the best MAP loss).
+    #[arg(long)]
+    pub noise_sigma: Option<f64>,
+    /// Checkpoint file (default `<fit file>.mcmc-checkpoint.json`).
+    #[arg(long)]
+    pub checkpoint: Option<PathBuf>,
+    /// Continue an interrupted run from its checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// Stop after this many iterations per chain, leaving the checkpoint (for tests).
+    #[arg(long, hide = true)]
+    pub mcmc_stop_after: Option<u64>,
 }
 
 /// One line of the candidates table of a multi-model fit.
@@ -100,6 +138,8 @@ struct FitFile<'a> {
     seed: u64,
     version: &'static str,
     candidates: Vec<Candidate>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    posterior: Option<&'a Posterior>,
 }
 
 pub fn run_fit(args: &FitArgs) -> Result<()> {
@@ -120,37 +160,64 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
             "every pixel is excluded (masked, saturated, non-finite or outside the sample)",
         ));
     }
-    let mut fits = Vec::new();
-    for &model in &args.models {
-        let options = FitOptions {
-            space: ParamSpace {
-                model,
-                ndf: args.ndf,
-                height: args.height,
-                anisotropic: args.anisotropic,
-                fresnel: args.fresnel,
-                diffuse: args.diffuse,
-            },
-            optimizer: args.optimizer,
-            loss: args.loss,
-            gradient: args.gradient,
-            max_iters: args.max_iters,
-            seed: args.seed,
-            progress: !args.quiet,
-            starts: args.starts,
-            projection: !args.no_projection,
-            pyramid: args.pyramid,
-        };
-        let fit = fit_model(&records, &options)?;
+    let spaces: Vec<ParamSpace> = args
+        .models
+        .iter()
+        .map(|&model| ParamSpace {
+            model,
+            ndf: args.ndf,
+            height: args.height,
+            anisotropic: args.anisotropic,
+            fresnel: args.fresnel,
+            diffuse: args.diffuse,
+        })
+        .collect();
+    if spaces.is_empty() {
+        return Err(Error::argument("--models", "no model given"));
+    }
+    let checkpoint = args
+        .mcmc
+        .checkpoint
+        .clone()
+        .unwrap_or_else(|| output.with_extension("mcmc-checkpoint.json"));
+    let run = if args.mcmc.mcmc {
+        match sample_posterior(
+            &records,
+            &spaces,
+            &mcmc_options(args, &spaces, checkpoint.clone()),
+        )? {
+            Some(run) => Some(run),
+            None => {
+                eprintln!(
+                    "stopped; the sampler state is in {} (continue with --resume)",
+                    checkpoint.display()
+                );
+                return Ok(());
+            }
+        }
+    } else {
+        None
+    };
+    let mut fits = match &run {
+        Some(run) if run.all_pixels => run.maps.clone(),
+        _ => Vec::new(),
+    };
+    for &space in spaces.iter().skip(fits.len()) {
+        let model = space.model;
+        let fit = fit_model(&records, &fit_options(args, space))?;
         if !args.quiet {
             eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
         }
         fits.push(fit);
     }
-    let best = fits
-        .iter()
-        .min_by(|a, b| a.loss.total_cmp(&b.loss))
-        .expect("at least one model");
+    // With a posterior the fit file reports the most probable model, else the lowest loss.
+    let best = match &run {
+        Some(run) => &fits[run.most_probable],
+        None => fits
+            .iter()
+            .min_by(|a, b| a.loss.total_cmp(&b.loss))
+            .expect("at least one model"),
+    };
     let candidates = fits
         .iter()
         .map(|f| Candidate {
@@ -172,6 +239,7 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         seed: args.seed,
         version: env!("CARGO_PKG_VERSION"),
         candidates,
+        posterior: run.as_ref().map(|r| &r.posterior),
     };
 
     // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure).
@@ -198,6 +266,41 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         serde_json::to_writer_pretty(&mut *w, &file).map_err(|e| Error::io(&output, e))
     })?;
     folder.commit()?;
+    if run.is_some() && checkpoint.exists() {
+        std::fs::remove_file(&checkpoint).map_err(|e| Error::io(&checkpoint, e))?;
+    }
     println!("{}", output.display());
     Ok(())
+}
+
+fn fit_options(args: &FitArgs, space: ParamSpace) -> FitOptions {
+    FitOptions {
+        space,
+        optimizer: args.optimizer,
+        loss: args.loss,
+        gradient: args.gradient,
+        max_iters: args.max_iters,
+        seed: args.seed,
+        progress: !args.quiet,
+        starts: args.starts,
+        projection: !args.no_projection,
+        pyramid: args.pyramid,
+    }
+}
+
+fn mcmc_options(args: &FitArgs, spaces: &[ParamSpace], checkpoint: PathBuf) -> McmcOptions {
+    McmcOptions {
+        map: fit_options(args, spaces[0]),
+        schedule: Schedule {
+            chains: args.mcmc.chains,
+            warmup: args.mcmc.mcmc_warmup,
+            samples: args.mcmc.mcmc_samples,
+            seed: args.seed,
+        },
+        noise_sigma: args.mcmc.noise_sigma,
+        pixels: args.mcmc.mcmc_pixels,
+        checkpoint: Some(checkpoint),
+        resume: args.mcmc.resume,
+        stop_after: args.mcmc.mcmc_stop_after,
+    }
 }

@@ -12,10 +12,17 @@
 //! 4. Report: the material, loss, per-photo losses, every start's result, the optimiser trace,
 //!    evaluation counts and timings, in the fit file format of DESIGN.md.
 
+pub mod cholesky;
+pub mod diagnostics;
+pub mod laplace;
 pub mod local;
+pub mod log_posterior;
+pub mod mcmc;
 pub mod objective;
 pub mod params;
+pub mod posterior;
 pub mod projection;
+pub mod sampler;
 pub mod start;
 
 use crate::bsdf::Model;
