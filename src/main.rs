@@ -30,6 +30,8 @@ enum Command {
     Render(commands::synth::RenderArgs),
     /// Fit material parameters to a photo set.
     Fit(commands::fit::FitArgs),
+    /// Fit several models to the same photos and write a comparison report.
+    Compare(commands::compare::CompareArgs),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +43,7 @@ fn main() -> ExitCode {
         Command::Synth(args) => commands::synth::run_synth(args),
         Command::Render(args) => commands::synth::run_render(args),
         Command::Fit(args) => commands::fit::run_fit(args),
+        Command::Compare(args) => commands::compare::run_compare(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -7,6 +7,7 @@ use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::params::{FresnelFamily, ParamSpace};
+use crate::fit::selection::{GaussianFit, Selection};
 use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
 use crate::microfacet::{Height, NdfKind};
@@ -19,9 +20,26 @@ use std::path::{Path, PathBuf};
 pub struct FitArgs {
     /// Photo set: a folder with capture.toml, a capture.toml, or a MaterialGAN-format folder.
     pub capture: PathBuf,
-    /// Models to fit, comma-separated; the fit file reports the one with the lowest loss.
+    /// Models to fit, comma-separated; the fit file reports the one preferred by BIC.
     #[arg(long, value_delimiter = ',', default_value = "single")]
     pub models: Vec<Model>,
+    #[command(flatten)]
+    pub options: FitOptionArgs,
+    /// Fit file to write (default fits/<capture name>.json); residual images go to
+    /// `<fit file without .json>.residuals/`.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Replace an existing fit file.
+    #[arg(long)]
+    pub force: bool,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// How to fit each model: the options `fit` and `compare` share.
+#[derive(clap::Args, Debug, Clone)]
+pub struct FitOptionArgs {
     #[arg(long, value_enum, default_value = "lbfgs")]
     pub optimizer: Optimizer,
     /// Fresnel family to fit.
@@ -47,21 +65,80 @@ pub struct FitArgs {
     pub max_iters: u64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Fit file to write (default fits/<capture name>.json); residual images go to
-    /// `<fit file without .json>.residuals/`.
-    #[arg(short, long)]
-    pub output: Option<PathBuf>,
-    /// Replace an existing fit file.
-    #[arg(long)]
-    pub force: bool,
-    /// No progress display.
-    #[arg(long)]
-    pub quiet: bool,
+}
+
+impl FitOptionArgs {
+    /// The library options for fitting `model`.
+    pub fn fit_options(&self, model: Model, progress: bool) -> FitOptions {
+        FitOptions {
+            space: ParamSpace {
+                model,
+                ndf: self.ndf,
+                height: self.height,
+                anisotropic: self.anisotropic,
+                fresnel: self.fresnel,
+                diffuse: self.diffuse,
+            },
+            optimizer: self.optimizer,
+            loss: self.loss,
+            max_iters: self.max_iters,
+            seed: self.seed,
+            progress,
+        }
+    }
+}
+
+/// The photo set's shading records with targets, refusing a set with no usable pixel.
+pub fn load_records(
+    capture_path: &Path,
+    capture: &Capture,
+    pixel_samples: usize,
+) -> Result<ShadingRecords> {
+    let records = ShadingRecords::build(capture, pixel_samples, true)?;
+    if records.weight.iter().all(|w| *w <= 0.0) {
+        return Err(Error::invalid(
+            capture_path,
+            "photos",
+            "every pixel is excluded (masked, saturated, non-finite or outside the sample)",
+        ));
+    }
+    Ok(records)
+}
+
+/// Fit every model of `models` to `records`, printing one summary line per model unless `quiet`.
+pub fn fit_models(
+    records: &ShadingRecords,
+    models: &[Model],
+    options: &FitOptionArgs,
+    quiet: bool,
+) -> Result<Vec<ModelFit>> {
+    models
+        .iter()
+        .map(|&model| {
+            let fit = fit_model(records, &options.fit_options(model, !quiet))?;
+            if !quiet {
+                eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
+            }
+            Ok(fit)
+        })
+        .collect()
+}
+
+/// The BIC ranking of fitted models on the records they were fitted to.
+pub fn select(records: &ShadingRecords, fits: &[ModelFit], options: &FitOptionArgs) -> Selection {
+    let measured: Vec<GaussianFit> = fits
+        .iter()
+        .map(|fit| {
+            let parameters = options.fit_options(fit.material.model, false).space.dim();
+            GaussianFit::measure(&fit.material, records, parameters, options.seed)
+        })
+        .collect();
+    Selection::rank(&measured)
 }
 
 /// One line of the candidates table of a multi-model fit.
 #[derive(Serialize)]
-struct Candidate {
+pub struct Candidate {
     model: Model,
     loss: f64,
     alpha: [f64; 2],
@@ -69,21 +146,65 @@ struct Candidate {
     seconds: f64,
 }
 
-/// The fit file: the best model's material and fit record, and what produced it.
+/// The fit file: one model's material and fit record, what produced it, and how it ranks
+/// among the fitted candidates.
 #[derive(Serialize)]
-struct FitFile<'a> {
+pub struct FitFile<'a> {
     #[serde(flatten)]
-    best: &'a ModelFit,
+    pub fit: &'a ModelFit,
     #[serde(skip_serializing_if = "Option::is_none")]
-    edge_tint: Option<[f64; 3]>,
-    capture: String,
-    capture_name: &'a str,
-    pixel_samples: usize,
-    pixels_used: usize,
-    excluded: ExclusionCounts,
-    seed: u64,
-    version: &'static str,
-    candidates: Vec<Candidate>,
+    pub edge_tint: Option<[f64; 3]>,
+    pub capture: String,
+    pub capture_name: &'a str,
+    pub pixel_samples: usize,
+    pub pixels_used: usize,
+    pub excluded: ExclusionCounts,
+    pub seed: u64,
+    pub version: &'static str,
+    pub candidates: Vec<Candidate>,
+    pub selection: &'a Selection,
+}
+
+impl<'a> FitFile<'a> {
+    /// The fit file of `fit`, one of `fits`, all fitted to `records` of `capture`.
+    pub fn new(
+        fit: &'a ModelFit,
+        fits: &[ModelFit],
+        selection: &'a Selection,
+        capture: (&Path, &'a Capture),
+        records: &ShadingRecords,
+        options: &FitOptionArgs,
+    ) -> FitFile<'a> {
+        FitFile {
+            fit,
+            edge_tint: edge_tint(&fit.material),
+            capture: capture.0.display().to_string(),
+            capture_name: &capture.1.name,
+            pixel_samples: options.pixel_samples,
+            pixels_used: records.weight.iter().filter(|w| **w > 0.0).count(),
+            excluded: records.excluded,
+            seed: options.seed,
+            version: env!("CARGO_PKG_VERSION"),
+            candidates: fits
+                .iter()
+                .map(|f| Candidate {
+                    model: f.material.model,
+                    loss: f.loss,
+                    alpha: f.material.alpha,
+                    f0: f.f0,
+                    seconds: f.seconds,
+                })
+                .collect(),
+            selection,
+        }
+    }
+
+    /// Write the file as pretty JSON, atomically.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        crate::capture::atomic_file::write_atomically(path, |w| {
+            serde_json::to_writer_pretty(&mut *w, self).map_err(|e| Error::io(path, e))
+        })
+    }
 }
 
 pub fn run_fit(args: &FitArgs) -> Result<()> {
@@ -95,67 +216,27 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
     check_overwrite(&output, args.force)?;
     let residual_folder = output.with_extension("residuals");
-    let records = ShadingRecords::build(&capture, args.pixel_samples, true)?;
-    let pixels_used = records.weight.iter().filter(|w| **w > 0.0).count();
-    if pixels_used == 0 {
-        return Err(Error::invalid(
-            &args.capture,
-            "photos",
-            "every pixel is excluded (masked, saturated, non-finite or outside the sample)",
-        ));
-    }
-    let mut fits = Vec::new();
-    for &model in &args.models {
-        let options = FitOptions {
-            space: ParamSpace {
-                model,
-                ndf: args.ndf,
-                height: args.height,
-                anisotropic: args.anisotropic,
-                fresnel: args.fresnel,
-                diffuse: args.diffuse,
-            },
-            optimizer: args.optimizer,
-            loss: args.loss,
-            max_iters: args.max_iters,
-            seed: args.seed,
-            progress: !args.quiet,
-        };
-        let fit = fit_model(&records, &options)?;
-        if !args.quiet {
-            eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
-        }
-        fits.push(fit);
+    let records = load_records(&args.capture, &capture, args.options.pixel_samples)?;
+    let fits = fit_models(&records, &args.models, &args.options, args.quiet)?;
+    let selection = select(&records, &fits, &args.options);
+    if !args.quiet && fits.len() > 1 {
+        eprintln!("{}", selection.verdict);
     }
     let best = fits
         .iter()
-        .min_by(|a, b| a.loss.total_cmp(&b.loss))
-        .expect("at least one model");
-    let candidates = fits
-        .iter()
-        .map(|f| Candidate {
-            model: f.material.model,
-            loss: f.loss,
-            alpha: f.material.alpha,
-            f0: f.f0,
-            seconds: f.seconds,
-        })
-        .collect();
-    let file = FitFile {
+        .find(|f| f.material.model == selection.preferred)
+        .expect("the preferred model is one of the fits");
+    let file = FitFile::new(
         best,
-        edge_tint: edge_tint(&best.material),
-        capture: args.capture.display().to_string(),
-        capture_name: &capture.name,
-        pixel_samples: args.pixel_samples,
-        pixels_used,
-        excluded: records.excluded,
-        seed: args.seed,
-        version: env!("CARGO_PKG_VERSION"),
-        candidates,
-    };
+        &fits,
+        &selection,
+        (&args.capture, &capture),
+        &records,
+        &args.options,
+    );
 
     // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure).
-    let predicted = render_all(&best.material, &records, args.seed);
+    let predicted = render_all(&best.material, &records, args.options.seed);
     let residual: Vec<[f64; 3]> = predicted
         .iter()
         .zip(&records.target)
@@ -174,9 +255,7 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
     if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
     }
-    crate::capture::atomic_file::write_atomically(&output, |w| {
-        serde_json::to_writer_pretty(&mut *w, &file).map_err(|e| Error::io(&output, e))
-    })?;
+    file.write(&output)?;
     folder.commit()?;
     println!("{}", output.display());
     Ok(())

@@ -7,8 +7,10 @@
 //! 3. Report: the material, loss, per-photo losses, the optimiser trace, evaluation counts and
 //!    timings, in the fit file format of DESIGN.md.
 
+pub mod holdout;
 pub mod objective;
 pub mod params;
+pub mod selection;
 
 use crate::bsdf::Model;
 use crate::error::{Error, Result};
@@ -161,6 +163,7 @@ fn start_material(space: &ParamSpace, records: &ShadingRecords, seed: u64) -> Ma
 /// Observer that records the trace and drives the progress display.
 struct TraceObserver {
     trace: Arc<Mutex<Vec<TracePoint>>>,
+    evaluations: Arc<std::sync::atomic::AtomicUsize>,
     progress: Option<Progress>,
     scale: f64,
 }
@@ -168,11 +171,9 @@ struct TraceObserver {
 impl<I: State<Float = f64>> Observe<I> for TraceObserver {
     fn observe_iter(&mut self, state: &I, _kv: &KV) -> std::result::Result<(), ArgminError> {
         let loss = state.get_best_cost() * self.scale;
-        let evaluations = state
-            .get_func_counts()
-            .get("cost_count")
-            .copied()
-            .unwrap_or(0) as usize;
+        // argmin's own cost_count is not yet updated when observers run (it read 0): count
+        // the objective's evaluations (line-search probes and gradient differences included).
+        let evaluations = self.evaluations.load(std::sync::atomic::Ordering::Relaxed);
         self.trace
             .lock()
             .expect("no panics while holding the lock")
@@ -205,6 +206,7 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
     let trace = Arc::new(Mutex::new(Vec::new()));
     let observer = TraceObserver {
         trace: trace.clone(),
+        evaluations: objective.evaluations.clone(),
         progress: options
             .progress
             .then(|| Progress::new(&format!("fit {}", space.model), options.max_iters)),

@@ -12,7 +12,7 @@ use crate::render::render_pixels;
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// Relative step of the central differences (in unbounded coordinates): truncation error
 /// ~h^2 = 1e-10, rounding error ~eps/h = 1e-11 relative to the cost.
@@ -29,7 +29,8 @@ pub struct Objective<'a> {
     seed: u64,
     /// The loss is divided by this, so optimiser tolerances are relative (L2: mean target^2).
     scale: f64,
-    pub evaluations: AtomicUsize,
+    /// Loss evaluations so far (shared with the trace observer).
+    pub evaluations: Arc<AtomicUsize>,
     /// Lowest cost seen so far and its coordinates: what an interrupted run still reports.
     pub best: Mutex<(f64, Vec<f64>)>,
 }
@@ -63,7 +64,7 @@ impl<'a> Objective<'a> {
             kind,
             seed,
             scale,
-            evaluations: AtomicUsize::new(0),
+            evaluations: Arc::new(AtomicUsize::new(0)),
             best: Mutex::new((f64::INFINITY, Vec::new())),
         }
     }
