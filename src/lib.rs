@@ -21,5 +21,6 @@ pub mod material;
 pub mod microfacet;
 pub mod progress;
 pub mod render;
+pub mod report;
 pub mod scalar;
 pub mod shading;

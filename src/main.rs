@@ -32,6 +32,8 @@ enum Command {
     Fit(commands::fit::FitArgs),
     /// Write a fit or material for a renderer (json, mitsuba, gltf, materialx).
     Export(commands::export::ExportArgs),
+    /// Fit several models to the same photos and write a comparison report.
+    Compare(commands::compare::CompareArgs),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +46,7 @@ fn main() -> ExitCode {
         Command::Render(args) => commands::synth::run_render(args),
         Command::Fit(args) => commands::fit::run_fit(args),
         Command::Export(args) => commands::export::run_export(args),
+        Command::Compare(args) => commands::compare::run_compare(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

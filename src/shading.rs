@@ -101,6 +101,19 @@ impl ShadingRecords {
         self.weight.len()
     }
 
+    /// The same records with the loss weight of every photo outside `keep` (indices into
+    /// `photos`) set to 0: fits and losses on the result see only the kept photos, while pixel
+    /// indices, and so the random streams of stochastic models, stay those of the full set.
+    pub fn restricted_to_photos(&self, keep: impl Fn(usize) -> bool) -> ShadingRecords {
+        let mut restricted = self.clone();
+        for (index, photo) in self.photos.iter().enumerate() {
+            if !keep(index) {
+                restricted.weight[photo.pixels()].fill(0.0);
+            }
+        }
+        restricted
+    }
+
     /// Computes the records of `capture` with `pixel_samples` stratified sub-samples per pixel
     /// (a perfect square k*k, see the module docs).
     ///

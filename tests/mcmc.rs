@@ -49,21 +49,19 @@ fn synth_set(dir: &Path, name: &str, material: &str, noise: f64, seed: u64) -> s
     let material_path = dir.join(format!("{name}.material.json"));
     std::fs::write(&material_path, material).unwrap();
     let set = dir.join(name);
-    run_ok(&[
-        "synth",
-        "--material",
-        material_path.to_str().unwrap(),
-        "--capture",
-        capture.to_str().unwrap(),
-        "-o",
-        set.to_str().unwrap(),
-        "--noise",
-        &noise.to_string(),
-        "--seed",
-        &seed.to_string(),
-        "--pixel-samples",
-        "1",
-    ]);
+    synth(
+        &material_path,
+        &capture,
+        &set,
+        &[
+            "--noise",
+            &noise.to_string(),
+            "--seed",
+            &seed.to_string(),
+            "--pixel-samples",
+            "1",
+        ],
+    );
     set
 }
 

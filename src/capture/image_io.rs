@@ -359,14 +359,15 @@ pub fn write_png_tonemapped(
             (linear_to_srgb(clamped) * 255.0).round() as u8
         })
         .collect();
+    write_png_rgb8(path, &bytes, png_width, png_height)
+}
+
+/// Writes 8-bit RGB bytes (row-major, row 0 at the top, already display-encoded) as a PNG,
+/// atomically.
+pub fn write_png_rgb8(path: &Path, bytes: &[u8], width: u32, height: u32) -> Result<()> {
     write_atomically(path, |file| {
         image::codecs::png::PngEncoder::new(file)
-            .write_image(
-                &bytes,
-                png_width,
-                png_height,
-                image::ExtendedColorType::Rgb8,
-            )
+            .write_image(bytes, width, height, image::ExtendedColorType::Rgb8)
             .map_err(|e| Error::io(path, e))
     })
 }

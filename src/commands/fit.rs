@@ -1,16 +1,18 @@
 //! `bouncefit fit DIR`: fit one or more models to a photo set and write the fit file plus a
-//! residual image per photo.
+//! residual image per photo. The fit options and the `--mcmc` options are shared with
+//! `compare` ([`FitOptionArgs`], [`McmcArgs`], [`fit_and_sample`]).
 
 use super::images::{display_exposure, write_photo_images};
 use super::output::{check_overwrite, StagedFolder};
 use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
-use crate::fit::mcmc::{sample_posterior, McmcOptions};
+use crate::fit::mcmc::{sample_posterior, McmcOptions, PosteriorRun};
 use crate::fit::objective::GradientMethod;
 use crate::fit::params::{FresnelFamily, ParamSpace};
 use crate::fit::posterior::Posterior;
 use crate::fit::sampler::Schedule;
+use crate::fit::selection::{GaussianFit, Selection};
 use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
 use crate::microfacet::{Height, NdfKind};
@@ -23,10 +25,30 @@ use std::path::{Path, PathBuf};
 pub struct FitArgs {
     /// Photo set: a folder with capture.toml, a capture.toml, or a MaterialGAN-format folder.
     pub capture: PathBuf,
-    /// Models to fit, comma-separated; the fit file reports the one with the lowest loss.
+    /// Models to fit, comma-separated; the fit file reports the one preferred by BIC (or, with
+    /// --mcmc, the most probable).
     #[arg(long, value_delimiter = ',', default_value = "single")]
     pub models: Vec<Model>,
-    /// auto: L-BFGS, or Nelder-Mead for heitz; pso: particle swarm start, then L-BFGS.
+    #[command(flatten)]
+    pub options: FitOptionArgs,
+    /// Fit file to write (default fits/<capture name>.json); residual images go to
+    /// `<fit file without .json>.residuals/`.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Replace an existing fit file.
+    #[arg(long)]
+    pub force: bool,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub mcmc: McmcArgs,
+}
+
+/// How to fit each model: the options `fit` and `compare` share.
+#[derive(clap::Args, Debug, Clone)]
+pub struct FitOptionArgs {
+    /// auto: L-BFGS from a variable-projection start; pso: particle swarm start, then L-BFGS.
     #[arg(long, value_enum, default_value = "auto")]
     pub optimizer: Optimizer,
     /// Local searches from this many starts: the global start plus seeded random ones.
@@ -66,18 +88,6 @@ pub struct FitArgs {
     pub max_iters: u64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Fit file to write (default fits/<capture name>.json); residual images go to
-    /// `<fit file without .json>.residuals/`.
-    #[arg(short, long)]
-    pub output: Option<PathBuf>,
-    /// Replace an existing fit file.
-    #[arg(long)]
-    pub force: bool,
-    /// No progress display.
-    #[arg(long)]
-    pub quiet: bool,
-    #[command(flatten)]
-    pub mcmc: McmcArgs,
 }
 
 /// `--mcmc` and its options (see `bouncefit::fit::mcmc`).
@@ -102,7 +112,7 @@ pub struct McmcArgs {
     /// Noise level of the likelihood in loss units (default: estimated from the best MAP loss).
     #[arg(long)]
     pub noise_sigma: Option<f64>,
-    /// Checkpoint file (default `<fit file>.mcmc-checkpoint.json`).
+    /// Checkpoint file (default: the output path with extension `.mcmc-checkpoint.json`).
     #[arg(long)]
     pub checkpoint: Option<PathBuf>,
     /// Continue an interrupted run from its checkpoint.
@@ -111,6 +121,155 @@ pub struct McmcArgs {
     /// Stop after this many iterations per chain, leaving the checkpoint (for tests).
     #[arg(long, hide = true)]
     pub mcmc_stop_after: Option<u64>,
+}
+
+impl FitOptionArgs {
+    /// The parameter space of `model` under these options.
+    pub fn space(&self, model: Model) -> ParamSpace {
+        ParamSpace {
+            model,
+            ndf: self.ndf,
+            height: self.height,
+            anisotropic: self.anisotropic,
+            fresnel: self.fresnel,
+            diffuse: self.diffuse,
+        }
+    }
+
+    /// The library options for fitting `model`.
+    pub fn fit_options(&self, model: Model, progress: bool) -> FitOptions {
+        FitOptions {
+            space: self.space(model),
+            optimizer: self.optimizer,
+            loss: self.loss,
+            gradient: self.gradient,
+            max_iters: self.max_iters,
+            seed: self.seed,
+            progress,
+            starts: self.starts,
+            projection: !self.no_projection,
+            pyramid: self.pyramid,
+        }
+    }
+
+    /// The library options of `--mcmc` over `models` (MAP starts use these fit options).
+    fn mcmc_options(&self, mcmc: &McmcArgs, models: &[Model], checkpoint: PathBuf) -> McmcOptions {
+        McmcOptions {
+            map: self.fit_options(models[0], true),
+            schedule: Schedule {
+                chains: mcmc.chains,
+                warmup: mcmc.mcmc_warmup,
+                samples: mcmc.mcmc_samples,
+                seed: self.seed,
+            },
+            noise_sigma: mcmc.noise_sigma,
+            pixels: mcmc.mcmc_pixels,
+            checkpoint: Some(checkpoint),
+            resume: mcmc.resume,
+            stop_after: mcmc.mcmc_stop_after,
+        }
+    }
+}
+
+/// The photo set's shading records with targets, refusing a set with no usable pixel.
+pub fn load_records(
+    capture_path: &Path,
+    capture: &Capture,
+    pixel_samples: usize,
+) -> Result<ShadingRecords> {
+    let records = ShadingRecords::build(capture, pixel_samples, true)?;
+    if records.weight.iter().all(|w| *w <= 0.0) {
+        return Err(Error::invalid(
+            capture_path,
+            "photos",
+            "every pixel is excluded (masked, saturated, non-finite or outside the sample)",
+        ));
+    }
+    Ok(records)
+}
+
+/// What [`fit_and_sample`] produced: a fit per model and, with `--mcmc`, the posterior run.
+pub struct Fits {
+    pub fits: Vec<ModelFit>,
+    pub posterior: Option<PosteriorRun>,
+    /// The sampler's checkpoint file (`--checkpoint`, or next to the output).
+    checkpoint: PathBuf,
+}
+
+impl Fits {
+    /// Removes the sampler's checkpoint once the outputs it led to are written.
+    pub fn remove_checkpoint(&self) -> Result<()> {
+        if self.posterior.is_some() && self.checkpoint.exists() {
+            std::fs::remove_file(&self.checkpoint).map_err(|e| Error::io(&self.checkpoint, e))?;
+        }
+        Ok(())
+    }
+}
+
+/// Fits every model of `models` to `records` and, with `--mcmc`, samples the posterior over
+/// them first (its MAP fits are reused when the likelihood saw every pixel). The sampler's
+/// checkpoint defaults to `output` with extension `.mcmc-checkpoint.json`. `None` when the
+/// sampler stopped early and left its checkpoint (hidden `--mcmc-stop-after`).
+pub fn fit_and_sample(
+    records: &ShadingRecords,
+    models: &[Model],
+    options: &FitOptionArgs,
+    mcmc: &McmcArgs,
+    output: &Path,
+    quiet: bool,
+) -> Result<Option<Fits>> {
+    if models.is_empty() {
+        return Err(Error::argument("--models", "no model given"));
+    }
+    let checkpoint = mcmc
+        .checkpoint
+        .clone()
+        .unwrap_or_else(|| output.with_extension("mcmc-checkpoint.json"));
+    let posterior = if mcmc.mcmc {
+        let spaces: Vec<ParamSpace> = models.iter().map(|&m| options.space(m)).collect();
+        let mut mcmc_options = options.mcmc_options(mcmc, models, checkpoint.clone());
+        mcmc_options.map.progress = !quiet;
+        match sample_posterior(records, &spaces, &mcmc_options)? {
+            Some(run) => Some(run),
+            None => {
+                eprintln!(
+                    "stopped; the sampler state is in {} (continue with --resume)",
+                    checkpoint.display()
+                );
+                return Ok(None);
+            }
+        }
+    } else {
+        None
+    };
+    let mut fits = match &posterior {
+        Some(run) if run.all_pixels => run.maps.clone(),
+        _ => Vec::new(),
+    };
+    for &model in models.iter().skip(fits.len()) {
+        let fit = fit_model(records, &options.fit_options(model, !quiet))?;
+        if !quiet {
+            eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
+        }
+        fits.push(fit);
+    }
+    Ok(Some(Fits {
+        fits,
+        posterior,
+        checkpoint,
+    }))
+}
+
+/// The BIC ranking of fitted models on the records they were fitted to.
+pub fn select(records: &ShadingRecords, fits: &[ModelFit], options: &FitOptionArgs) -> Selection {
+    let measured: Vec<GaussianFit> = fits
+        .iter()
+        .map(|fit| {
+            let parameters = options.space(fit.material.model).dim();
+            GaussianFit::measure(&fit.material, records, parameters, options.seed)
+        })
+        .collect();
+    Selection::rank(&measured)
 }
 
 /// One line of the candidates table of a multi-model fit.
@@ -123,11 +282,11 @@ struct Candidate {
     seconds: f64,
 }
 
-/// The fit file: the best model's material and fit record, and what produced it.
+/// The fit file: the chosen model's material and fit record, and what produced it.
 #[derive(Serialize)]
-struct FitFile<'a> {
+pub struct FitFile<'a> {
     #[serde(flatten)]
-    best: &'a ModelFit,
+    fit: &'a ModelFit,
     #[serde(skip_serializing_if = "Option::is_none")]
     edge_tint: Option<[f64; 3]>,
     capture: String,
@@ -138,8 +297,53 @@ struct FitFile<'a> {
     seed: u64,
     version: &'static str,
     candidates: Vec<Candidate>,
+    selection: &'a Selection,
     #[serde(skip_serializing_if = "Option::is_none")]
     posterior: Option<&'a Posterior>,
+}
+
+impl<'a> FitFile<'a> {
+    /// The fit file of `fit`, one of `fits`, all fitted to `records` of `capture`.
+    pub fn new(
+        fit: &'a ModelFit,
+        fits: &[ModelFit],
+        selection: &'a Selection,
+        posterior: Option<&'a Posterior>,
+        capture: (&Path, &'a Capture),
+        records: &ShadingRecords,
+        options: &FitOptionArgs,
+    ) -> FitFile<'a> {
+        FitFile {
+            fit,
+            edge_tint: edge_tint(&fit.material),
+            capture: capture.0.display().to_string(),
+            capture_name: &capture.1.name,
+            pixel_samples: options.pixel_samples,
+            pixels_used: records.weight.iter().filter(|w| **w > 0.0).count(),
+            excluded: records.excluded,
+            seed: options.seed,
+            version: env!("CARGO_PKG_VERSION"),
+            candidates: fits
+                .iter()
+                .map(|f| Candidate {
+                    model: f.material.model,
+                    loss: f.loss,
+                    alpha: f.material.alpha,
+                    f0: f.f0,
+                    seconds: f.seconds,
+                })
+                .collect(),
+            selection,
+            posterior,
+        }
+    }
+
+    /// Write the file as pretty JSON, atomically.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        crate::capture::atomic_file::write_atomically(path, |w| {
+            serde_json::to_writer_pretty(&mut *w, self).map_err(|e| Error::io(path, e))
+        })
+    }
 }
 
 pub fn run_fit(args: &FitArgs) -> Result<()> {
@@ -151,99 +355,43 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
     check_overwrite(&output, args.force)?;
     let residual_folder = output.with_extension("residuals");
-    let records = ShadingRecords::build(&capture, args.pixel_samples, true)?;
-    let pixels_used = records.weight.iter().filter(|w| **w > 0.0).count();
-    if pixels_used == 0 {
-        return Err(Error::invalid(
-            &args.capture,
-            "photos",
-            "every pixel is excluded (masked, saturated, non-finite or outside the sample)",
-        ));
-    }
-    let spaces: Vec<ParamSpace> = args
-        .models
-        .iter()
-        .map(|&model| ParamSpace {
-            model,
-            ndf: args.ndf,
-            height: args.height,
-            anisotropic: args.anisotropic,
-            fresnel: args.fresnel,
-            diffuse: args.diffuse,
-        })
-        .collect();
-    if spaces.is_empty() {
-        return Err(Error::argument("--models", "no model given"));
-    }
-    let checkpoint = args
-        .mcmc
-        .checkpoint
-        .clone()
-        .unwrap_or_else(|| output.with_extension("mcmc-checkpoint.json"));
-    let run = if args.mcmc.mcmc {
-        match sample_posterior(
-            &records,
-            &spaces,
-            &mcmc_options(args, &spaces, checkpoint.clone()),
-        )? {
-            Some(run) => Some(run),
-            None => {
-                eprintln!(
-                    "stopped; the sampler state is in {} (continue with --resume)",
-                    checkpoint.display()
-                );
-                return Ok(());
-            }
-        }
-    } else {
-        None
+    let records = load_records(&args.capture, &capture, args.options.pixel_samples)?;
+    let Some(done) = fit_and_sample(
+        &records,
+        &args.models,
+        &args.options,
+        &args.mcmc,
+        &output,
+        args.quiet,
+    )?
+    else {
+        return Ok(());
     };
-    let mut fits = match &run {
-        Some(run) if run.all_pixels => run.maps.clone(),
-        _ => Vec::new(),
-    };
-    for &space in spaces.iter().skip(fits.len()) {
-        let model = space.model;
-        let fit = fit_model(&records, &fit_options(args, space))?;
-        if !args.quiet {
-            eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
-        }
-        fits.push(fit);
+    let (fits, posterior) = (&done.fits, &done.posterior);
+    let selection = select(&records, fits, &args.options);
+    if !args.quiet && fits.len() > 1 {
+        eprintln!("{}", selection.verdict);
     }
-    // With a posterior the fit file reports the most probable model, else the lowest loss.
-    let best = match &run {
+    // With a posterior the fit file reports the most probable model, else BIC's choice.
+    let best = match posterior {
         Some(run) => &fits[run.most_probable],
         None => fits
             .iter()
-            .min_by(|a, b| a.loss.total_cmp(&b.loss))
-            .expect("at least one model"),
+            .find(|f| f.material.model == selection.preferred)
+            .expect("the preferred model is one of the fits"),
     };
-    let candidates = fits
-        .iter()
-        .map(|f| Candidate {
-            model: f.material.model,
-            loss: f.loss,
-            alpha: f.material.alpha,
-            f0: f.f0,
-            seconds: f.seconds,
-        })
-        .collect();
-    let file = FitFile {
+    let file = FitFile::new(
         best,
-        edge_tint: edge_tint(&best.material),
-        capture: args.capture.display().to_string(),
-        capture_name: &capture.name,
-        pixel_samples: args.pixel_samples,
-        pixels_used,
-        excluded: records.excluded,
-        seed: args.seed,
-        version: env!("CARGO_PKG_VERSION"),
-        candidates,
-        posterior: run.as_ref().map(|r| &r.posterior),
-    };
+        fits,
+        &selection,
+        posterior.as_ref().map(|r| &r.posterior),
+        (&args.capture, &capture),
+        &records,
+        &args.options,
+    );
 
     // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure).
-    let predicted = render_all(&best.material, &records, args.seed);
+    let predicted = render_all(&best.material, &records, args.options.seed);
     let residual: Vec<[f64; 3]> = predicted
         .iter()
         .zip(&records.target)
@@ -262,45 +410,9 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
     if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
     }
-    crate::capture::atomic_file::write_atomically(&output, |w| {
-        serde_json::to_writer_pretty(&mut *w, &file).map_err(|e| Error::io(&output, e))
-    })?;
+    file.write(&output)?;
     folder.commit()?;
-    if run.is_some() && checkpoint.exists() {
-        std::fs::remove_file(&checkpoint).map_err(|e| Error::io(&checkpoint, e))?;
-    }
+    done.remove_checkpoint()?;
     println!("{}", output.display());
     Ok(())
-}
-
-fn fit_options(args: &FitArgs, space: ParamSpace) -> FitOptions {
-    FitOptions {
-        space,
-        optimizer: args.optimizer,
-        loss: args.loss,
-        gradient: args.gradient,
-        max_iters: args.max_iters,
-        seed: args.seed,
-        progress: !args.quiet,
-        starts: args.starts,
-        projection: !args.no_projection,
-        pyramid: args.pyramid,
-    }
-}
-
-fn mcmc_options(args: &FitArgs, spaces: &[ParamSpace], checkpoint: PathBuf) -> McmcOptions {
-    McmcOptions {
-        map: fit_options(args, spaces[0]),
-        schedule: Schedule {
-            chains: args.mcmc.chains,
-            warmup: args.mcmc.mcmc_warmup,
-            samples: args.mcmc.mcmc_samples,
-            seed: args.seed,
-        },
-        noise_sigma: args.mcmc.noise_sigma,
-        pixels: args.mcmc.mcmc_pixels,
-        checkpoint: Some(checkpoint),
-        resume: args.mcmc.resume,
-        stop_after: args.mcmc.mcmc_stop_after,
-    }
 }

@@ -2,6 +2,7 @@
 //! arguments and maps errors to exit codes; each command lives in its own file here.
 
 pub mod brdf;
+pub mod compare;
 pub mod export;
 pub mod fit;
 pub mod images;

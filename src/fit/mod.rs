@@ -14,6 +14,7 @@
 
 pub mod cholesky;
 pub mod diagnostics;
+pub mod holdout;
 pub mod laplace;
 pub mod local;
 pub mod log_posterior;
@@ -23,6 +24,7 @@ pub mod params;
 pub mod posterior;
 pub mod projection;
 pub mod sampler;
+pub mod selection;
 pub mod start;
 
 use crate::bsdf::Model;

@@ -1,0 +1,182 @@
+//! `bouncefit compare DIR --models single,bitterli,... -o REPORT_DIR`: fit each model to the
+//! same photos, rank them by BIC, held-out error (`--holdout K`) and posterior probability
+//! (`--mcmc`), and write a report folder ([`crate::report`]).
+//!
+//! | option | behaviour |
+//! | --- | --- |
+//! | `--models` | models to fit (required, distinct) |
+//! | `--holdout K` | K-fold over photos (photo i in fold i mod K): each model is refitted K times without one fold and scored on it |
+//! | `--mcmc` and its options | one sampler run over all models with jumps between them (as `fit --mcmc`): each row gains its posterior probability and 95% intervals, and `posterior.png` is drawn; checkpoint `<REPORT_DIR>.mcmc-checkpoint.json` |
+//! | fit options | as `fit` ([`FitOptionArgs`]) |
+//! | `-o REPORT_DIR` | staged and renamed into place; an existing non-empty folder needs `--force` |
+
+use super::fit::{fit_and_sample, load_records, select, FitFile, FitOptionArgs, McmcArgs};
+use super::images::display_exposure;
+use super::output::StagedFolder;
+use crate::bsdf::Model;
+use crate::capture::atomic_file::write_atomically;
+use crate::capture::Capture;
+use crate::error::{Error, Result};
+use crate::fit::holdout::{check_fold_count, cross_validate};
+use crate::fit::selection::{HeldOutErrors, HeldOutRanking};
+use crate::render::render_all;
+use crate::report::images::{residual_scale, write_model_images};
+use crate::report::{html, markdown, plots, HeldOut, ModelRow, Report};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args, Debug)]
+pub struct CompareArgs {
+    /// Photo set: a folder with capture.toml, a capture.toml, or a MaterialGAN-format folder.
+    pub capture: PathBuf,
+    /// Models to compare, comma-separated.
+    #[arg(long, value_delimiter = ',', required = true)]
+    pub models: Vec<Model>,
+    /// Also fit K times leaving out one fold of photos (photo i in fold i mod K) and report
+    /// the error on the held-out photos.
+    #[arg(long, value_name = "K")]
+    pub holdout: Option<usize>,
+    #[command(flatten)]
+    pub options: FitOptionArgs,
+    /// Report folder to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Replace an existing report folder.
+    #[arg(long)]
+    pub force: bool,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub mcmc: McmcArgs,
+}
+
+pub fn run_compare(args: &CompareArgs) -> Result<()> {
+    for (i, model) in args.models.iter().enumerate() {
+        if args.models[..i].contains(model) {
+            return Err(Error::argument(
+                "--models",
+                format!("{model} is listed twice"),
+            ));
+        }
+    }
+    let capture = Capture::open(&args.capture)?;
+    super::synth::warn_all(&capture);
+    if let Some(folds) = args.holdout {
+        check_fold_count(folds, capture.photos.len())?;
+    }
+    let folder = StagedFolder::new(&args.output, args.force)?;
+    let records = load_records(&args.capture, &capture, args.options.pixel_samples)?;
+    let Some(done) = fit_and_sample(
+        &records,
+        &args.models,
+        &args.options,
+        &args.mcmc,
+        &args.output,
+        args.quiet,
+    )?
+    else {
+        return Ok(());
+    };
+    let fits = &done.fits;
+    let run = done.posterior.as_ref().map(|r| &r.posterior);
+    let selection = select(&records, fits, &args.options);
+
+    let mut held_out = Vec::new();
+    if let Some(folds) = args.holdout {
+        for &model in &args.models {
+            if !args.quiet {
+                eprintln!("{model}: {folds} held-out fits");
+            }
+            let options = args.options.fit_options(model, !args.quiet);
+            held_out.push(HeldOutErrors {
+                model,
+                fold_losses: cross_validate(&records, &options, folds)?,
+            });
+        }
+    }
+    let held_out_ranking = (!held_out.is_empty()).then(|| HeldOutRanking::rank(&held_out));
+
+    let rows: Vec<ModelRow> = fits
+        .iter()
+        .enumerate()
+        .map(|(i, fit)| {
+            let errors = held_out.get(i).map(|e| HeldOut::new(e.fold_losses.clone()));
+            ModelRow::new(fit, &selection, errors, run)
+        })
+        .collect();
+
+    let root = folder.path("");
+    let predictions: Vec<Vec<[f64; 3]>> = fits
+        .iter()
+        .map(|fit| render_all(&fit.material, &records, args.options.seed))
+        .collect();
+    let exposure = display_exposure(&records.target);
+    let scale = residual_scale(&records, &predictions);
+    for (fit, predicted) in fits.iter().zip(&predictions) {
+        let model = fit.material.model;
+        let model_folder = root.join(model.name());
+        std::fs::create_dir(&model_folder).map_err(|e| Error::io(&model_folder, e))?;
+        write_model_images(&root, model, &records, predicted, exposure, scale)?;
+        FitFile::new(
+            fit,
+            fits,
+            &selection,
+            run,
+            (&args.capture, &capture),
+            &records,
+            &args.options,
+        )
+        .write(&model_folder.join("fit.json"))?;
+    }
+
+    let verdicts = Report::verdicts(&selection, held_out_ranking.as_ref(), &rows);
+    let report = Report {
+        capture: args.capture.display().to_string(),
+        capture_name: capture.name.clone(),
+        photos: records.photos.iter().map(|p| p.stem.clone()).collect(),
+        pixels_used: records.weight.iter().filter(|w| **w > 0.0).count(),
+        loss_kind: args.options.loss,
+        holdout_folds: args.holdout,
+        models: rows,
+        selection,
+        held_out_ranking,
+        residual_scale: scale,
+        verdicts,
+    };
+    write_report(&report, &root)?;
+    folder.commit()?;
+    done.remove_checkpoint()?;
+    if !args.quiet {
+        for verdict in &report.verdicts {
+            eprintln!("{verdict}");
+        }
+    }
+    println!("{}", args.output.display());
+    Ok(())
+}
+
+/// Plots, `report.json`, `report.md` and `report.html` under `root` (the images are there).
+fn write_report(report: &Report, root: &Path) -> Result<()> {
+    plots::loss_curves(&root.join(crate::report::LOSS_CURVES), &report.models)?;
+    let posteriors: Vec<_> = report
+        .models
+        .iter()
+        .filter_map(|r| r.posterior.as_ref().map(|p| (r.model, p)))
+        .collect();
+    if !posteriors.is_empty() {
+        plots::posterior_intervals(&root.join(crate::report::POSTERIOR_PLOT), &posteriors)?;
+    }
+    let write_text = |name: &str, text: &str| {
+        let path = root.join(name);
+        write_atomically(&path, |w| {
+            w.write_all(text.as_bytes())
+                .map_err(|e| Error::io(&path, e))
+        })
+    };
+    let json =
+        serde_json::to_string_pretty(report).map_err(|e| Error::io(root.join("report.json"), e))?;
+    write_text("report.json", &json)?;
+    write_text("report.md", &markdown::render(report))?;
+    write_text("report.html", &html::render(report, root)?)
+}

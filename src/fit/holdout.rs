@@ -1,0 +1,200 @@
+//! K-fold cross-validation over the photos of a set: how well a model fitted to some photos
+//! predicts the others.
+//!
+//! | step | behaviour |
+//! | --- | --- |
+//! | folds | photo `i` (capture order) is held out in fold `i mod K`; `2 <= K <= photos` |
+//! | training | the model is refitted on the records with the held-out photos' weights set to 0 ([`ShadingRecords::restricted_to_photos`]), same options and seed |
+//! | prediction | the fitted material is rendered on the held-out photos' pixels and scored with the fit's loss (its own normalisation over those pixels) |
+//!
+//! A model with more freedom lowers the training loss but gains on held-out photos only if it
+//! describes the material better, so held-out error is a ranking that needs no noise model
+//! (Hastie, Tibshirani & Friedman, *Elements of Statistical Learning*, section 7.10).
+
+use super::{fit_model, FitOptions};
+use crate::error::{Error, Result};
+use crate::loss::{ImageLayout, Loss, LossKind};
+use crate::material::Material;
+use crate::render::render_pixels;
+use crate::shading::ShadingRecords;
+
+/// The fold in which photo `photo` is held out.
+pub fn fold_of(photo: usize, folds: usize) -> usize {
+    photo % folds
+}
+
+/// Checks a fold count against the number of photos (`--holdout K`).
+pub fn check_fold_count(folds: usize, photos: usize) -> Result<()> {
+    if folds < 2 || folds > photos {
+        return Err(Error::argument(
+            "--holdout",
+            format!("K must be between 2 and the number of photos ({photos}), got {folds}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Loss (of `kind`) of `material` on the weighted pixels of `records`; `None` when no pixel
+/// has weight.
+pub fn loss_of(
+    material: &Material,
+    records: &ShadingRecords,
+    kind: LossKind,
+    seed: u64,
+) -> Option<f64> {
+    let pixels: Vec<usize> = (0..records.pixel_count())
+        .filter(|&p| records.weight[p] > 0.0)
+        .collect();
+    if pixels.is_empty() {
+        return None;
+    }
+    let target: Vec<[f64; 3]> = pixels.iter().map(|&p| records.target[p]).collect();
+    let weight: Vec<f64> = pixels.iter().map(|&p| records.weight[p]).collect();
+    let predicted = render_pixels(material, records, &pixels, seed);
+    let layout = ImageLayout::new(records, &pixels);
+    Some(Loss::new(kind, &target, &weight, &layout).value(&predicted))
+}
+
+/// Held-out loss of each of `folds` folds for the model of `options`.
+pub fn cross_validate(
+    records: &ShadingRecords,
+    options: &FitOptions,
+    folds: usize,
+) -> Result<Vec<f64>> {
+    check_fold_count(folds, records.photos.len())?;
+    (0..folds)
+        .map(|fold| {
+            let training = records.restricted_to_photos(|i| fold_of(i, folds) != fold);
+            let held_out = records.restricted_to_photos(|i| fold_of(i, folds) == fold);
+            let fit = fit_model(&training, options)?;
+            loss_of(&fit.material, &held_out, options.loss, options.seed).ok_or_else(|| {
+                let stems: Vec<&str> = records
+                    .photos
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| fold_of(*i, folds) == fold)
+                    .map(|(_, p)| p.stem.as_str())
+                    .collect();
+                Error::argument(
+                    "--holdout",
+                    format!(
+                        "fold {fold} holds out photos {} and none of their pixels enters the loss",
+                        stems.join(", ")
+                    ),
+                )
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shading::PhotoSpan;
+
+    /// Records of `photos` photos of 2x1 pixels, every pixel weighted.
+    fn records(photos: usize) -> ShadingRecords {
+        ShadingRecords {
+            photos: (0..photos)
+                .map(|i| PhotoSpan {
+                    stem: format!("{i:02}"),
+                    width: 2,
+                    height: 1,
+                    first_pixel: 2 * i,
+                })
+                .collect(),
+            samples_per_pixel: 1,
+            wi: vec![[0.0, 0.0, 1.0]; 2 * photos],
+            wo: vec![[0.0, 0.0, 1.0]; 2 * photos],
+            irradiance: vec![[1.0; 3]; 2 * photos],
+            target: vec![[0.5; 3]; 2 * photos],
+            weight: vec![1.0; 2 * photos],
+            ..ShadingRecords::default()
+        }
+    }
+
+    #[test]
+    fn every_photo_is_held_out_exactly_once_and_folds_are_balanced() {
+        for photos in 2..12 {
+            for folds in 2..=photos {
+                let mut held_out = vec![0; photos];
+                let mut sizes = vec![0; folds];
+                for (fold, size) in sizes.iter_mut().enumerate() {
+                    for (photo, count) in held_out.iter_mut().enumerate() {
+                        if fold_of(photo, folds) == fold {
+                            *count += 1;
+                            *size += 1;
+                        }
+                    }
+                }
+                assert!(held_out.iter().all(|&c| c == 1));
+                let (min, max) = (sizes.iter().min().unwrap(), sizes.iter().max().unwrap());
+                assert!(
+                    max - min <= 1 && *min >= 1,
+                    "{photos} photos, {folds} folds"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn fold_counts_outside_two_to_photos_are_errors() {
+        assert!(check_fold_count(1, 9).is_err());
+        assert!(check_fold_count(10, 9).is_err());
+        assert!(check_fold_count(2, 9).is_ok() && check_fold_count(9, 9).is_ok());
+    }
+
+    #[test]
+    fn restriction_zeroes_exactly_the_excluded_photos() {
+        let all = records(5);
+        let kept = all.restricted_to_photos(|i| fold_of(i, 3) != 1);
+        for (i, photo) in all.photos.iter().enumerate() {
+            let expected = if i % 3 == 1 { 0.0 } else { 1.0 };
+            assert!(kept.weight[photo.pixels()].iter().all(|&w| w == expected));
+        }
+        // Everything but the weights is untouched.
+        assert_eq!(kept.target, all.target);
+        assert_eq!(kept.irradiance, all.irradiance);
+    }
+
+    #[test]
+    fn held_out_loss_counts_only_the_held_out_pixels() {
+        let mut all = records(3);
+        // Photo 1 is much brighter: its pixels dominate the loss of any prediction.
+        all.target[2] = [5.0; 3];
+        all.target[3] = [5.0; 3];
+        let material = Material {
+            model: crate::bsdf::Model::Single,
+            ndf: crate::microfacet::NdfKind::Ggx,
+            height: crate::microfacet::Height::Correlated,
+            alpha: [0.3; 2],
+            fresnel: crate::material::FresnelSpec::White,
+            diffuse: [0.0; 3],
+        };
+        let full = loss_of(&material, &all, LossKind::L2, 0).unwrap();
+        let photo1 = loss_of(
+            &material,
+            &all.restricted_to_photos(|i| i == 1),
+            LossKind::L2,
+            0,
+        )
+        .unwrap();
+        let others = loss_of(
+            &material,
+            &all.restricted_to_photos(|i| i != 1),
+            LossKind::L2,
+            0,
+        )
+        .unwrap();
+        // The full loss is the pixel-weighted mean of the two parts (2 and 4 pixels).
+        assert!((full - (2.0 * photo1 + 4.0 * others) / 6.0).abs() < 1e-12 * full);
+        assert!(photo1 > 10.0 * others);
+        assert!(loss_of(
+            &material,
+            &all.restricted_to_photos(|_| false),
+            LossKind::L2,
+            0
+        )
+        .is_none());
+    }
+}

@@ -1,0 +1,93 @@
+//! `report.html`: the report as one self-contained page: inline CSS, every image embedded as a
+//! base64 `data:image/png` URI, no script and no network access.
+
+use super::Report;
+use crate::error::{Error, Result};
+use base64::Engine;
+use std::path::Path;
+
+const STYLE: &str = "body{font-family:sans-serif;margin:2em;color:#222}\
+table{border-collapse:collapse;margin:1em 0}\
+th,td{border:1px solid #bbb;padding:4px 8px;text-align:left;vertical-align:top}\
+th{background:#eee}img.photo{width:160px;image-rendering:pixelated}\
+img.plot{max-width:100%}figure{display:inline-block;margin:4px}\
+figcaption{font-size:small;text-align:center}";
+
+/// Escape text for HTML element content and attribute values.
+fn escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// A PNG file under `root` as a data URI.
+fn data_uri(root: &Path, relative: &str) -> Result<String> {
+    let path = root.join(relative);
+    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    Ok(format!(
+        "data:image/png;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(bytes)
+    ))
+}
+
+/// An `<img>` of a PNG under `root`, embedded, with `class` and `caption` as alt text.
+fn image(root: &Path, relative: &str, class: &str, caption: &str) -> Result<String> {
+    Ok(format!(
+        "<img class=\"{class}\" alt=\"{}\" src=\"{}\">",
+        escape(caption),
+        data_uri(root, relative)?
+    ))
+}
+
+/// The page of `report`, whose images have been written under `root`.
+pub fn render(report: &Report, root: &Path) -> Result<String> {
+    let title = format!("Model comparison: {}", escape(&report.capture_name));
+    let mut html = format!(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{title}</title>\
+         <style>{STYLE}</style></head><body>\n<h1>{title}</h1>\n<ul>\n"
+    );
+    for (label, value) in report.settings() {
+        html += &format!("<li>{label}: {}</li>\n", escape(&value));
+    }
+    html += "</ul>\n<h2>Verdict</h2>\n<ul>\n";
+    for verdict in &report.verdicts {
+        html += &format!("<li>{}</li>\n", escape(verdict));
+    }
+    html += "</ul>\n<h2>Models</h2>\n<table>\n<tr>";
+    for heading in Report::table_header() {
+        html += &format!("<th>{}</th>", escape(heading));
+    }
+    html += "</tr>\n";
+    for cells in report.table_rows() {
+        html += "<tr>";
+        for cell in cells {
+            html += &format!("<td>{}</td>", escape(&cell));
+        }
+        html += "</tr>\n";
+    }
+    html += "</table>\n<p>BIC = N ln(RSS/N) + k ln N (Gaussian noise of unknown variance, \
+             N = pixels &times; 3). Delta-BIC on the Kass &amp; Raftery scale: &lt; 2 not \
+             distinguishable, 2-6 positive, 6-10 strong, &gt; 10 very strong.</p>\n<h2>Plots</h2>\n";
+    for (caption, path) in report.plots() {
+        html += &format!(
+            "<figure>{}<figcaption>{}</figcaption></figure>\n",
+            image(root, path, "plot", caption)?,
+            escape(caption)
+        );
+    }
+    html += "<h2>Photos</h2>\n";
+    for (stem, cells) in report.image_grid() {
+        html += &format!("<h3>{}</h3>\n<div>", escape(&stem));
+        for (caption, path) in cells {
+            html += &format!(
+                "<figure>{}<figcaption>{}</figcaption></figure>",
+                image(root, &path, "photo", &caption)?,
+                escape(&caption)
+            );
+        }
+        html += "</div>\n";
+    }
+    html += "</body></html>\n";
+    Ok(html)
+}
