@@ -10,7 +10,10 @@
 //!
 //! Only pixels with positive weight are rendered. Stochastic models draw from the per-pixel
 //! random streams of a fixed seed (common random numbers), so the objective is a deterministic
-//! function of the coordinates and differences and line searches see a smooth surface.
+//! function of the coordinates and differences and line searches see a smooth surface. They are
+//! rendered twice, on two independent sets of streams, and scored with the pair loss
+//! ([`Loss::pair_value`]): with one render the squared error would include the render's
+//! variance and pull the fit towards less multiple scattering.
 
 use super::params::ParamSpace;
 use crate::bsdf::differentiable;
@@ -29,6 +32,10 @@ const FD_STEP: f64 = 1e-5;
 
 /// Largest dimension of the dual-number path (anisotropic conductor with diffuse: 2 + 6 + 3).
 const MAX_EXACT_DIM: usize = 11;
+
+/// Mixed into the seed for the second render of a stochastic model: its per-pixel streams
+/// ([`crate::albedo::rng_stream`]) are then independent of the first render's.
+const SECOND_RENDER_STREAMS: u64 = 0xD1B5_4A32_D192_ED03;
 
 /// How the objective's gradient is computed (see the module table).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
@@ -50,7 +57,9 @@ pub struct Objective<'a> {
     weight: Vec<f64>,
     layout: ImageLayout,
     kind: LossKind,
-    seed: u64,
+    /// Seeds of the renders the loss compares: one for deterministic models, two
+    /// (independent streams) for stochastic ones.
+    seeds: Vec<u64>,
     gradient: GradientMethod,
     /// The loss is divided by this, so optimiser tolerances are relative (L2: mean target^2).
     scale: f64,
@@ -80,6 +89,15 @@ impl<'a> Objective<'a> {
             LossKind::RelativeL2 | LossKind::LogL1 | LossKind::Ssim => 1.0,
         };
         let layout = ImageLayout::new(records, &pixels);
+        let stochastic = space
+            .material(&vec![0.0; space.dim()])
+            .brdf()
+            .is_stochastic();
+        let seeds = if stochastic {
+            vec![seed, seed ^ SECOND_RENDER_STREAMS]
+        } else {
+            vec![seed]
+        };
         Objective {
             space,
             records,
@@ -88,12 +106,31 @@ impl<'a> Objective<'a> {
             weight,
             layout,
             kind,
-            seed,
+            seeds,
             gradient: GradientMethod::Exact,
             scale,
             evaluations: Arc::new(AtomicUsize::new(0)),
             best: Mutex::new((f64::INFINITY, Vec::new())),
         }
+    }
+
+    /// The same objective on one render only: for a stochastic model its loss then includes
+    /// the render's variance, a bias towards less multiple scattering, but regions where the
+    /// model is noisy look bad instead of offering the pair loss's noise to exploit. Fits
+    /// search their start on this and polish on the pair loss (`fit::fit_level`).
+    pub fn single_render(mut self) -> Self {
+        self.seeds.truncate(1);
+        self
+    }
+
+    /// Seeds of the renders the loss compares (see [`Objective::renders`]).
+    pub fn seeds(&self) -> &[u64] {
+        &self.seeds
+    }
+
+    /// Whether the loss compares two renders (a stochastic model).
+    pub fn is_paired(&self) -> bool {
+        self.seeds.len() == 2
     }
 
     /// The same objective with gradients computed by `method` (default: exact where available).
@@ -131,9 +168,9 @@ impl<'a> Objective<'a> {
         &self.pixels
     }
 
-    /// Seed of the common random numbers.
+    /// Seed of the common random numbers (of the first render).
     pub fn seed(&self) -> u64 {
-        self.seed
+        self.seeds[0]
     }
 
     /// Targets of the loss pixels.
@@ -141,14 +178,24 @@ impl<'a> Objective<'a> {
         &self.target
     }
 
-    /// Predicted radiance of the loss pixels at coordinates `x`.
+    /// Predicted radiance of the loss pixels at coordinates `x` (the first render).
     pub fn predict(&self, x: &[f64]) -> Vec<[f64; 3]> {
         render_pixels(
             &self.space.material(x),
             self.records,
             &self.pixels,
-            self.seed,
+            self.seeds[0],
         )
+    }
+
+    /// The renders the loss compares at `x`: one, or two on independent streams for a
+    /// stochastic model.
+    pub fn renders(&self, x: &[f64]) -> Vec<Vec<[f64; 3]>> {
+        let material = self.space.material(x);
+        self.seeds
+            .iter()
+            .map(|&seed| render_pixels(&material, self.records, &self.pixels, seed))
+            .collect()
     }
 
     /// The loss bound to this objective's pixels.
@@ -156,14 +203,23 @@ impl<'a> Objective<'a> {
         Loss::new(self.kind, &self.target, &self.weight, &self.layout)
     }
 
+    /// Per-pixel loss terms of `renders` (from [`Objective::renders`]).
+    fn terms_of(&self, renders: &[Vec<[f64; 3]>]) -> Vec<f64> {
+        match renders {
+            [one] => self.image_loss().terms(one),
+            [first, second] => self.image_loss().pair_terms(first, second),
+            _ => unreachable!("one or two renders"),
+        }
+    }
+
     /// The loss (not normalised) at `x`.
     pub fn loss(&self, x: &[f64]) -> f64 {
-        self.image_loss().value(&self.predict(x))
+        self.image_loss().mean_of(&self.terms_of(&self.renders(x)))
     }
 
     /// Loss per photo at `x`: (photo index, loss, pixel count).
     pub fn loss_per_photo(&self, x: &[f64]) -> Vec<(usize, f64, usize)> {
-        let terms = self.image_loss().terms(&self.predict(x));
+        let terms = self.terms_of(&self.renders(x));
         let mut per_photo = vec![(0.0, 0.0, 0); self.records.photos.len()];
         for (k, &(photo, _)) in self.layout.place.iter().enumerate() {
             let entry = &mut per_photo[photo];
@@ -228,27 +284,46 @@ impl<'a> Objective<'a> {
             .collect();
         let surface = self.space.surface(&coords);
         let brdf = differentiable(self.space.model, surface.single)?;
-        let predicted = render_model(
-            brdf.as_ref(),
-            surface.diffuse,
-            self.records,
-            &self.pixels,
-            self.seed,
-        );
-        let values: Vec<[f64; 3]> = predicted.iter().map(|p| p.map(|v| v.re)).collect();
+        let renders: Vec<Vec<[DualSVec64<N>; 3]>> = self
+            .seeds
+            .iter()
+            .map(|&seed| {
+                render_model(
+                    brdf.as_ref(),
+                    surface.diffuse,
+                    self.records,
+                    &self.pixels,
+                    seed,
+                )
+            })
+            .collect();
+        let values: Vec<Vec<[f64; 3]>> = renders
+            .iter()
+            .map(|r| r.iter().map(|p| p.map(|v| v.re)).collect())
+            .collect();
         let loss = self.image_loss();
+        let (value, slopes) = match &values[..] {
+            [one] => (loss.value(one), vec![loss.gradient(one)]),
+            [first, second] => {
+                let (g1, g2) = loss.pair_gradient(first, second);
+                (loss.pair_value(first, second), vec![g1, g2])
+            }
+            _ => unreachable!("one or two renders"),
+        };
         let mut gradient = vec![0.0; N];
-        for (p, dl) in predicted.iter().zip(loss.gradient(&values)) {
-            for c in 0..3 {
-                if let Some(dp) = &p[c].eps.0 {
-                    gradient
-                        .iter_mut()
-                        .zip(dp.iter())
-                        .for_each(|(g, d)| *g += dl[c] * d);
+        for (render, slope) in renders.iter().zip(&slopes) {
+            for (p, dl) in render.iter().zip(slope) {
+                for c in 0..3 {
+                    if let Some(dp) = &p[c].eps.0 {
+                        gradient
+                            .iter_mut()
+                            .zip(dp.iter())
+                            .for_each(|(g, d)| *g += dl[c] * d);
+                    }
                 }
             }
         }
-        Some((loss.value(&values), gradient))
+        Some((value, gradient))
     }
 
     /// Undo the normalisation of a cost reported by the optimiser.

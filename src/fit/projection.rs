@@ -8,6 +8,7 @@
 //! | basis | the model rendered at the Chebyshev-Lobatto nodes of F0 in [0, 1] (with the fit's common random numbers), converted to monomial coefficients per pixel |
 //! | diffuse | linear: the white Lambertian image [`crate::render::lambertian_pixels`] |
 //! | solve per channel | the weighted squared error `sum v (P(F0) + rho d - t)^2` from moment sums: `rho` in closed form, clamped to [0, 1] (non-negative least squares in one variable); `F0` by a scan of 201 points and golden-section refinement |
+//! | stochastic models | the objective's two renders on independent streams give two polynomials `P1`, `P2` per pixel, and the moments are those of the pair loss `sum v (P1 + rho d - t)(P2 + rho d - t)` ([`crate::loss::Loss::pair_value`]): `sum v A1_j A2_k` symmetrised, `sum v (A1_j + A2_j)/2 t` |
 //! | losses | those that are weighted squared errors ([`crate::loss::Loss::quadratic_weights`]): `l2`, `relative-l2` |
 //!
 //! For degree-1 and degree-2 models the projected loss is exact; for the others it is a
@@ -50,7 +51,8 @@ pub struct Projection<'o, 'r> {
 
 /// Moment sums of one channel, from which the squared error at any (F0, rho) follows.
 struct Moments {
-    /// `sum v A_j A_k`, `sum v A_j t`, `sum v A_j d` over pixels (A = monomial coefficients).
+    /// `sum v A_j A_k`, `sum v A_j t`, `sum v A_j d` over pixels (A = monomial coefficients;
+    /// for two renders, `A_j A_k` is `(A1_j A2_k + A2_j A1_k) / 2` and `A_j` is `(A1_j + A2_j) / 2`).
     aa: Vec<Vec<f64>>,
     at: Vec<f64>,
     ad: Vec<f64>,
@@ -191,14 +193,16 @@ impl<'o, 'r> Projection<'o, 'r> {
     /// full coordinates of that minimum.
     pub fn solve(&self, roughness: &[f64]) -> (f64, Vec<f64>) {
         self.renders.fetch_add(self.nodes.len(), Ordering::Relaxed);
-        let renders: Vec<Vec<[f64; 3]>> = self
+        // renders[node][stream][pixel]
+        let renders: Vec<Vec<Vec<[f64; 3]>>> = self
             .nodes
             .iter()
             .map(|&f| {
                 self.objective
-                    .predict(&self.coordinates(roughness, [f; 3], [0.0; 3]))
+                    .renders(&self.coordinates(roughness, [f; 3], [0.0; 3]))
             })
             .collect();
+        let streams = renders[0].len();
         let target = self.objective.targets();
         let k = self.nodes.len();
         let (mut f0, mut rho, mut loss) = ([0.0; 3], [0.0; 3], 0.0);
@@ -216,14 +220,20 @@ impl<'o, 'r> Projection<'o, 'r> {
                 if v == 0.0 {
                     continue;
                 }
-                let values: Vec<f64> = renders.iter().map(|r| r[p][c]).collect();
-                let a = monomial_coefficients(&self.nodes, &values);
+                let coefficients: Vec<Vec<f64>> = (0..streams)
+                    .map(|s| {
+                        let values: Vec<f64> = renders.iter().map(|r| r[s][p][c]).collect();
+                        monomial_coefficients(&self.nodes, &values)
+                    })
+                    .collect();
+                let (a1, a2) = (&coefficients[0], &coefficients[streams - 1]);
                 let (t, d) = (target[p][c], self.diffuse.as_ref().map_or(0.0, |d| d[p][c]));
                 for j in 0..k {
-                    m.at[j] += v * a[j] * t;
-                    m.ad[j] += v * a[j] * d;
+                    let a = 0.5 * (a1[j] + a2[j]);
+                    m.at[j] += v * a * t;
+                    m.ad[j] += v * a * d;
                     for l in 0..k {
-                        m.aa[j][l] += v * a[j] * a[l];
+                        m.aa[j][l] += v * 0.5 * (a1[j] * a2[l] + a2[j] * a1[l]);
                     }
                 }
                 m.tt += v * t * t;
@@ -233,7 +243,7 @@ impl<'o, 'r> Projection<'o, 'r> {
             let (f, r, e) = m.minimise();
             (f0[c], rho[c], loss) = (f, r, loss + e);
         }
-        (loss.max(0.0), self.coordinates(roughness, f0, rho))
+        (loss, self.coordinates(roughness, f0, rho))
     }
 }
 

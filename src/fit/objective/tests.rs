@@ -231,8 +231,9 @@ fn single_bounce_derivative_in_ln_alpha_matches_the_hand_derivation() {
 /// comparison is per pixel and channel: central differences at steps `h` and `h / 2` that agree
 /// with each other (no flip within the step) must agree with the dual derivative to 1e-4
 /// relative; the pixels where they disagree (flips) must be rare. Both the L2 and log-L1
-/// losses then follow from [`Loss::gradient`], tested on its own, and the objective's exact
-/// gradient is checked to be exactly that chain rule over these derivatives.
+/// losses then follow from [`Loss::gradient`] and [`Loss::pair_gradient`], tested on their
+/// own, and the objective's exact gradient is checked to be exactly that chain rule over the
+/// derivatives of its two renders.
 fn check_pathwise(model: Model) {
     const H: f64 = 1e-6;
     let mut rng = crate::bsdf::Rng::seed_from_u64(23);
@@ -258,7 +259,13 @@ fn check_pathwise(model: Model) {
                 let base = predict(&x);
                 let peak = base.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
                 let mut chain = vec![0.0; x.len()];
-                let dloss = objective.image_loss().gradient(&base);
+                // The objective scores the pair loss of two renders; its slope per render.
+                let renders = objective.renders(&x);
+                assert_eq!(renders.len(), 2, "a stochastic model is rendered twice");
+                assert_eq!(renders[0], base);
+                let (dloss, dloss_second) = objective
+                    .image_loss()
+                    .pair_gradient(&renders[0], &renders[1]);
                 for i in 0..x.len() {
                     let coords: Vec<Dual64> = x
                         .iter()
@@ -275,6 +282,14 @@ fn check_pathwise(model: Model) {
                     let surface = space.surface(&coords);
                     let brdf = differentiable(model, surface.single).expect("a dual path");
                     let dual = render_model(brdf.as_ref(), surface.diffuse, &records, &pixels, 5);
+                    let second = objective.seeds()[1];
+                    let dual_second =
+                        render_model(brdf.as_ref(), surface.diffuse, &records, &pixels, second);
+                    for (d, slope) in dual_second.iter().zip(&dloss_second) {
+                        for c in 0..3 {
+                            chain[i] += slope[c] * d[c].eps;
+                        }
+                    }
                     let central = |h: f64| {
                         let mut probe = x.clone();
                         probe[i] = x[i] + h;
