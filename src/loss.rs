@@ -215,6 +215,21 @@ impl<'a> Loss<'a> {
         })
     }
 
+    /// Per-pixel terms of one render ([`Loss::terms`]) or of two renders of a stochastic model
+    /// on independent streams ([`Loss::pair_terms`]).
+    pub fn renders_terms(&self, renders: &[Vec<[f64; 3]>]) -> Vec<f64> {
+        match renders {
+            [one] => self.terms(one),
+            [first, second] => self.pair_terms(first, second),
+            _ => panic!("a loss compares one or two renders, got {}", renders.len()),
+        }
+    }
+
+    /// The loss of [`Loss::renders_terms`].
+    pub fn renders_value(&self, renders: &[Vec<[f64; 3]>]) -> f64 {
+        self.mean_of(&self.renders_terms(renders))
+    }
+
     /// Weighted mean of [`Loss::pair_terms`]: the loss of a stochastic prediction.
     pub fn pair_value(&self, first: &[[f64; 3]], second: &[[f64; 3]]) -> f64 {
         self.mean_of(&self.pair_terms(first, second))

@@ -11,6 +11,7 @@
 //! describes the material better, so held-out error is a ranking that needs no noise model
 //! (Hastie, Tibshirani & Friedman, *Elements of Statistical Learning*, section 7.10).
 
+use super::objective::render_seeds;
 use super::{fit_model, FitOptions};
 use crate::error::{Error, Result};
 use crate::loss::{ImageLayout, Loss, LossKind};
@@ -34,8 +35,9 @@ pub fn check_fold_count(folds: usize, photos: usize) -> Result<()> {
     Ok(())
 }
 
-/// Loss (of `kind`) of `material` on the weighted pixels of `records`; `None` when no pixel
-/// has weight.
+/// Loss (of `kind`) of `material` on the weighted pixels of `records`, the pair loss of two
+/// renders for a stochastic model (as in fits: one render would add its variance); `None`
+/// when no pixel has weight.
 pub fn loss_of(
     material: &Material,
     records: &ShadingRecords,
@@ -50,9 +52,12 @@ pub fn loss_of(
     }
     let target: Vec<[f64; 3]> = pixels.iter().map(|&p| records.target[p]).collect();
     let weight: Vec<f64> = pixels.iter().map(|&p| records.weight[p]).collect();
-    let predicted = render_pixels(material, records, &pixels, seed);
+    let renders: Vec<Vec<[f64; 3]>> = render_seeds(material.brdf().is_stochastic(), seed)
+        .into_iter()
+        .map(|seed| render_pixels(material, records, &pixels, seed))
+        .collect();
     let layout = ImageLayout::new(records, &pixels);
-    Some(Loss::new(kind, &target, &weight, &layout).value(&predicted))
+    Some(Loss::new(kind, &target, &weight, &layout).renders_value(&renders))
 }
 
 /// Held-out loss of each of `folds` folds for the model of `options`.

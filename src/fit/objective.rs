@@ -37,6 +37,16 @@ const MAX_EXACT_DIM: usize = 11;
 /// ([`crate::albedo::rng_stream`]) are then independent of the first render's.
 const SECOND_RENDER_STREAMS: u64 = 0xD1B5_4A32_D192_ED03;
 
+/// Seeds of the renders a loss compares: `[seed]` for a deterministic model, two independent
+/// stream sets for a stochastic one (see [`Loss::pair_value`]).
+pub fn render_seeds(stochastic: bool, seed: u64) -> Vec<u64> {
+    if stochastic {
+        vec![seed, seed ^ SECOND_RENDER_STREAMS]
+    } else {
+        vec![seed]
+    }
+}
+
 /// How the objective's gradient is computed (see the module table).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
@@ -93,11 +103,7 @@ impl<'a> Objective<'a> {
             .material(&vec![0.0; space.dim()])
             .brdf()
             .is_stochastic();
-        let seeds = if stochastic {
-            vec![seed, seed ^ SECOND_RENDER_STREAMS]
-        } else {
-            vec![seed]
-        };
+        let seeds = render_seeds(stochastic, seed);
         Objective {
             space,
             records,
@@ -203,23 +209,14 @@ impl<'a> Objective<'a> {
         Loss::new(self.kind, &self.target, &self.weight, &self.layout)
     }
 
-    /// Per-pixel loss terms of `renders` (from [`Objective::renders`]).
-    fn terms_of(&self, renders: &[Vec<[f64; 3]>]) -> Vec<f64> {
-        match renders {
-            [one] => self.image_loss().terms(one),
-            [first, second] => self.image_loss().pair_terms(first, second),
-            _ => unreachable!("one or two renders"),
-        }
-    }
-
     /// The loss (not normalised) at `x`.
     pub fn loss(&self, x: &[f64]) -> f64 {
-        self.image_loss().mean_of(&self.terms_of(&self.renders(x)))
+        self.image_loss().renders_value(&self.renders(x))
     }
 
     /// Loss per photo at `x`: (photo index, loss, pixel count).
     pub fn loss_per_photo(&self, x: &[f64]) -> Vec<(usize, f64, usize)> {
-        let terms = self.terms_of(&self.renders(x));
+        let terms = self.image_loss().renders_terms(&self.renders(x));
         let mut per_photo = vec![(0.0, 0.0, 0); self.records.photos.len()];
         for (k, &(photo, _)) in self.layout.place.iter().enumerate() {
             let entry = &mut per_photo[photo];

@@ -85,7 +85,8 @@ pub struct GaussianFit {
 
 impl GaussianFit {
     /// Measure the residual of `material` on the loss pixels of `records` (same seed as the fit,
-    /// so a stochastic model sees the same random numbers it was fitted with).
+    /// so a stochastic model sees the same random numbers it was fitted with, and the pair
+    /// residual of its two renders, free of the render's variance: see [`crate::loss`]).
     pub fn measure(
         material: &Material,
         records: &ShadingRecords,
