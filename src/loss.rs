@@ -230,6 +230,18 @@ impl<'a> Loss<'a> {
         self.mean_of(&self.renders_terms(renders))
     }
 
+    /// `d renders_value / d render` for each of the renders of [`Loss::renders_terms`].
+    pub fn renders_gradient(&self, renders: &[Vec<[f64; 3]>]) -> Vec<Vec<[f64; 3]>> {
+        match renders {
+            [one] => vec![self.gradient(one)],
+            [first, second] => {
+                let (g1, g2) = self.pair_gradient(first, second);
+                vec![g1, g2]
+            }
+            _ => panic!("a loss compares one or two renders, got {}", renders.len()),
+        }
+    }
+
     /// Weighted mean of [`Loss::pair_terms`]: the loss of a stochastic prediction.
     pub fn pair_value(&self, first: &[[f64; 3]], second: &[[f64; 3]]) -> f64 {
         self.mean_of(&self.pair_terms(first, second))

@@ -299,14 +299,7 @@ impl<'a> Objective<'a> {
             .map(|r| r.iter().map(|p| p.map(|v| v.re)).collect())
             .collect();
         let loss = self.image_loss();
-        let (value, slopes) = match &values[..] {
-            [one] => (loss.value(one), vec![loss.gradient(one)]),
-            [first, second] => {
-                let (g1, g2) = loss.pair_gradient(first, second);
-                (loss.pair_value(first, second), vec![g1, g2])
-            }
-            _ => unreachable!("one or two renders"),
-        };
+        let (value, slopes) = (loss.renders_value(&values), loss.renders_gradient(&values));
         let mut gradient = vec![0.0; N];
         for (render, slope) in renders.iter().zip(&slopes) {
             for (p, dl) in render.iter().zip(slope) {
