@@ -156,17 +156,7 @@ fn single_bounce_photos_are_not_credited_to_the_multi_bounce_model() {
     assert!(row(&report, "single")["held_out"].is_null());
     // `fit` uses the same ranking: its fit file is of the preferred model and carries the
     // selection.
-    let fit_path = dir.path().join("fit.json");
-    run_ok(&[
-        "fit",
-        set.to_str().unwrap(),
-        "--models",
-        "single,kulla-conty",
-        "-o",
-        fit_path.to_str().unwrap(),
-        "--quiet",
-    ]);
-    let fit = read_json(&fit_path);
+    let fit = fit_json(&set, &["--models", "single,kulla-conty"], dir.path());
     assert_eq!(fit["model"], fit["selection"]["preferred"]);
     assert_eq!(fit["selection"]["preferred"], preferred);
     let candidates = fit["selection"]["candidates"].as_array().unwrap();
