@@ -7,7 +7,8 @@
 //! - [`microfacet`]: distributions, Lambda, masking, visible normals, Fresnel;
 //! - [`bsdf`]: the BRDF trait and one file per model;
 //! - [`capture`], [`shading`]: photo sets and the per-pixel records computed from them;
-//! - [`export`]: a material for Mitsuba 3, glTF and MaterialX.
+//! - [`export`]: a material for Mitsuba 3, glTF and MaterialX;
+//! - [`stress`]: the numerical stress sweep of every model.
 
 pub mod albedo;
 pub mod bsdf;
@@ -24,3 +25,4 @@ pub mod render;
 pub mod report;
 pub mod scalar;
 pub mod shading;
+pub mod stress;

@@ -34,6 +34,8 @@ enum Command {
     Export(commands::export::ExportArgs),
     /// Fit several models to the same photos and write a comparison report.
     Compare(commands::compare::CompareArgs),
+    /// Sweep every model over extreme inputs and count NaN, Inf, negative values and energy gain.
+    Stress(commands::stress::StressArgs),
 }
 
 fn main() -> ExitCode {
@@ -47,6 +49,11 @@ fn main() -> ExitCode {
         Command::Fit(args) => commands::fit::run_fit(args),
         Command::Export(args) => commands::export::run_export(args),
         Command::Compare(args) => commands::compare::run_compare(args),
+        // Findings (NaN, Inf, negative values) exit with 1; bad input with 2 as everywhere.
+        Command::Stress(args) => match commands::stress::run_stress(args) {
+            Ok(false) => return ExitCode::from(1),
+            other => other.map(|_clean| ()),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

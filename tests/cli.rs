@@ -414,3 +414,38 @@ fn stochastic_models_report_errors_and_bitterli_its_fallback_rate() {
     assert_eq!(a["f"], b["f"]);
     assert!(triple(&a["f_multi"])[0] > 0.0 && triple(&a["stderr"])[0] > 0.0);
 }
+
+#[test]
+fn stress_quick_json_reports_every_requested_model_clean() {
+    let out = run_ok(&[
+        "stress",
+        "--quick",
+        "--json",
+        "--quiet",
+        "--models",
+        "single,bitterli",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let models = v["models"].as_array().unwrap();
+    assert_eq!(models.len(), 2);
+    for m in models {
+        for key in [
+            "model",
+            "queries",
+            "nan",
+            "inf",
+            "negative",
+            "energy_violations",
+            "fallback_rate",
+            "worst_rel_dev",
+        ] {
+            assert!(!m[key].is_null(), "missing {key} in {m}");
+        }
+        assert!(m["queries"].as_u64().unwrap() > 1000);
+        for key in ["nan", "inf", "negative"] {
+            assert_eq!(m[key], 0, "{}: {key}: {}", m["model"], m["first_bad"]);
+        }
+    }
+    // Bitterli's recurrences take their fallback somewhere in the sweep (grazing, equal Lambdas).
+    assert!(models[1]["fallback_rate"].as_f64().unwrap() > 0.0);
+}

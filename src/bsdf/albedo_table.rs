@@ -4,25 +4,21 @@
 //!
 //! | property | value |
 //! | --- | --- |
-//! | grid | 32 values of `mu = cos(theta)` uniform in [1e-3, 1]; 80 values of `alpha` log-uniform in [1e-4, 3] |
+//! | grid | 48 values of `mu = cos(theta)` uniform in `sqrt(mu)` over [1e-5, 1] (dense toward grazing, where `E` changes fastest); 80 values of `alpha` log-uniform in [1e-4, 3] |
 //! | entries | `directional_albedo` of `single` with white Fresnel, 96 x 96 node quadrature each (within 5e-5 of 256 x 256) |
-//! | interpolation | `ln E` bilinear in (`mu`, `ln alpha`), clamped to the grid: at large roughness `E` falls like a power of `alpha`, so `ln E` is nearly linear in `ln alpha` (interpolating `E` itself on 40 nodes was 2.8% off at `alpha` = 1.5, `mu` = 1; `ln E` on 80 nodes is within 0.21% at every point tested) |
-//! | when | computed deterministically on first use, once per (distribution, height model) and process, in parallel (about 0.5 s on 2 cores); never written to disk |
+//! | interpolation | `ln E` bilinear in (`sqrt(mu)`, `ln alpha`), clamped to the grid: at large roughness `E` falls like a power of `alpha`, so `ln E` is nearly linear in `ln alpha` (interpolating `E` itself on 40 nodes was 2.8% off at `alpha` = 1.5, `mu` = 1; `ln E` on 80 nodes is within 0.21% at every point tested) |
+//! | storage | computed once by the quadrature above and embedded in the binary (`albedo_tables.bin`, little-endian f64, 4 tables x 80 x 48); computing them took 3 s (GGX) and 9 s (Beckmann) of CPU at every start. A test recomputes rows of every table and requires agreement to 1e-12; after changing the grid or `single`, regenerate with `cargo test --release --lib regenerate_albedo_tables -- --ignored` |
 //! | anisotropy | isotropic tables; an anisotropic surface reads them at `alpha = sqrt(ax ay)` (an approximation, as in Kulla & Conty 2017) |
 
-use super::single::SingleBounce;
-use crate::albedo::directional_albedo;
-use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
-use crate::scalar::{Real, Vec3};
-use rayon::prelude::*;
+use crate::microfacet::{Height, NdfKind};
+use crate::scalar::Real;
 use std::sync::OnceLock;
 
-const MU_COUNT: usize = 32;
-const MU_MIN: f64 = 1e-3;
+const MU_COUNT: usize = 48;
+const MU_MIN: f64 = 1e-5;
 const ALPHA_COUNT: usize = 80;
 const ALPHA_MIN: f64 = 1e-4;
 const ALPHA_MAX: f64 = 3.0;
-const QUADRATURE_NODES: usize = 96 * 96;
 
 /// `E(mu, alpha)` and `E_avg(alpha)` of one distribution and height model, stored as logarithms.
 pub struct AlbedoTable {
@@ -31,16 +27,32 @@ pub struct AlbedoTable {
     ln_e_avg: Vec<f64>,
 }
 
+/// Node `j` of the `mu` grid, uniform in `sqrt(mu)`.
 fn mu_node(j: usize) -> f64 {
-    MU_MIN + (1.0 - MU_MIN) * j as f64 / (MU_COUNT - 1) as f64
+    let root_min = MU_MIN.sqrt();
+    (root_min + (1.0 - root_min) * j as f64 / (MU_COUNT - 1) as f64).powi(2)
 }
 
-fn alpha_node(i: usize) -> f64 {
-    (ALPHA_MIN.ln() + (ALPHA_MAX.ln() - ALPHA_MIN.ln()) * i as f64 / (ALPHA_COUNT - 1) as f64).exp()
+/// The tables as computed by `tests::compute_e`, in slot order (see [`AlbedoTable::get`]).
+static EMBEDDED: &[u8] = include_bytes!("albedo_tables.bin");
+const TABLE_KINDS: [(NdfKind, Height); 4] = [
+    (NdfKind::Ggx, Height::Correlated),
+    (NdfKind::Ggx, Height::Uncorrelated),
+    (NdfKind::Beckmann, Height::Correlated),
+    (NdfKind::Beckmann, Height::Uncorrelated),
+];
+
+/// Table `slot` of [`EMBEDDED`]: `ALPHA_COUNT * MU_COUNT` values of `E`.
+fn embedded_e(slot: usize) -> Vec<f64> {
+    let len = ALPHA_COUNT * MU_COUNT * 8;
+    EMBEDDED[slot * len..(slot + 1) * len]
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().expect("chunks of 8 bytes")))
+        .collect()
 }
 
 impl AlbedoTable {
-    /// The table of `(ndf, height)`, computed on first use.
+    /// The table of `(ndf, height)`, read from the embedded data on first use.
     pub fn get(ndf: NdfKind, height: Height) -> &'static AlbedoTable {
         static TABLES: [OnceLock<AlbedoTable>; 4] = [
             OnceLock::new(),
@@ -48,31 +60,16 @@ impl AlbedoTable {
             OnceLock::new(),
             OnceLock::new(),
         ];
-        let slot = match (ndf, height) {
-            (NdfKind::Ggx, Height::Correlated) => 0,
-            (NdfKind::Ggx, Height::Uncorrelated) => 1,
-            (NdfKind::Beckmann, Height::Correlated) => 2,
-            (NdfKind::Beckmann, Height::Uncorrelated) => 3,
-        };
-        TABLES[slot].get_or_init(|| AlbedoTable::compute(ndf, height))
+        let slot = TABLE_KINDS
+            .iter()
+            .position(|&kind| kind == (ndf, height))
+            .expect("every (ndf, height) pair has a table");
+        TABLES[slot].get_or_init(|| AlbedoTable::from_e(&embedded_e(slot)))
     }
 
-    fn compute(ndf: NdfKind, height: Height) -> AlbedoTable {
-        let e: Vec<f64> = (0..ALPHA_COUNT * MU_COUNT)
-            .into_par_iter()
-            .map(|k| {
-                let (alpha, mu) = (alpha_node(k / MU_COUNT), mu_node(k % MU_COUNT));
-                let model = SingleBounce {
-                    microfacet: Microfacet::new(ndf, alpha, alpha),
-                    fresnel: Fresnel::White,
-                    height,
-                };
-                let wi = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
-                directional_albedo(&model, wi, QUADRATURE_NODES, 0).value[0]
-            })
-            .collect();
-        // E_avg = 2 int E(mu) mu dmu by the trapezoid rule on the mu nodes; below MU_MIN, E is
-        // taken constant (that sliver weighs 2 * MU_MIN^2 / 2 = 1e-6).
+    /// The table from `E` at every node; `E_avg` by the trapezoid rule over the `mu` nodes.
+    fn from_e(e: &[f64]) -> AlbedoTable {
+        // Below MU_MIN, E is taken constant (that sliver weighs 2 * MU_MIN^2 / 2 = 1e-10).
         let e_avg: Vec<f64> = (0..ALPHA_COUNT)
             .map(|i| {
                 let row = &e[i * MU_COUNT..(i + 1) * MU_COUNT];
@@ -107,7 +104,9 @@ impl AlbedoTable {
     /// `E(mu, alpha)`: white directional albedo of `single` at incidence cosine `mu`.
     pub fn e<T: Real>(&self, mu: f64, alpha: T) -> T {
         let (i, t) = Self::alpha_cell(alpha);
-        let s = ((mu.clamp(MU_MIN, 1.0) - MU_MIN) / (1.0 - MU_MIN) * (MU_COUNT - 1) as f64)
+        let root_min = MU_MIN.sqrt();
+        let s = ((mu.clamp(MU_MIN, 1.0).sqrt() - root_min) / (1.0 - root_min)
+            * (MU_COUNT - 1) as f64)
             .min((MU_COUNT - 1) as f64 - 1e-9);
         let j = s as usize;
         let u = s - j as f64;
@@ -127,6 +126,79 @@ impl AlbedoTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::albedo::directional_albedo;
+    use crate::bsdf::single::SingleBounce;
+    use crate::microfacet::{Fresnel, Microfacet};
+    use crate::scalar::Vec3;
+    use rayon::prelude::*;
+
+    /// Quadrature nodes of every entry.
+    const QUADRATURE_NODES: usize = 96 * 96;
+
+    fn alpha_node(i: usize) -> f64 {
+        (ALPHA_MIN.ln() + (ALPHA_MAX.ln() - ALPHA_MIN.ln()) * i as f64 / (ALPHA_COUNT - 1) as f64)
+            .exp()
+    }
+
+    /// `E` at every node, row-major `[alpha][mu]`, by quadrature (what the embedded data holds).
+    fn compute_e(ndf: NdfKind, height: Height, alpha_rows: &[usize]) -> Vec<f64> {
+        let nodes: Vec<(usize, usize)> = alpha_rows
+            .iter()
+            .flat_map(|&i| (0..MU_COUNT).map(move |j| (i, j)))
+            .collect();
+        nodes
+            .into_par_iter()
+            .map(|(i, j)| {
+                let (alpha, mu) = (alpha_node(i), mu_node(j));
+                let model = SingleBounce {
+                    microfacet: Microfacet::new(ndf, alpha, alpha),
+                    fresnel: Fresnel::White,
+                    height,
+                };
+                let wi = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                directional_albedo(&model, wi, QUADRATURE_NODES, 0).value[0]
+            })
+            .collect()
+    }
+
+    /// Writes `albedo_tables.bin` from the quadrature (about 4 min of CPU); run by hand after a
+    /// change of the grid or of `single`, then commit the file.
+    #[test]
+    #[ignore = "regenerates the embedded tables"]
+    fn regenerate_albedo_tables() {
+        let rows: Vec<usize> = (0..ALPHA_COUNT).collect();
+        let bytes: Vec<u8> = TABLE_KINDS
+            .iter()
+            .flat_map(|&(ndf, height)| compute_e(ndf, height, &rows))
+            .flat_map(f64::to_le_bytes)
+            .collect();
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/src/bsdf/albedo_tables.bin");
+        std::fs::write(path, bytes).unwrap();
+    }
+
+    #[test]
+    fn embedded_tables_match_their_quadrature() {
+        assert_eq!(
+            EMBEDDED.len(),
+            TABLE_KINDS.len() * ALPHA_COUNT * MU_COUNT * 8
+        );
+        for (slot, &(ndf, height)) in TABLE_KINDS.iter().enumerate() {
+            // Two rows per table, different in every table, ends included across the four.
+            let rows = [slot * 26, ALPHA_COUNT - 1 - slot * 13];
+            let fresh = compute_e(ndf, height, &rows);
+            let stored = embedded_e(slot);
+            for (k, value) in fresh.iter().enumerate() {
+                let (i, j) = (rows[k / MU_COUNT], k % MU_COUNT);
+                let embedded = stored[i * MU_COUNT + j];
+                assert!(
+                    (embedded / value - 1.0).abs() < 1e-12,
+                    "{ndf:?} {height:?} alpha {} mu {}: embedded {embedded} vs {value}",
+                    alpha_node(i),
+                    mu_node(j)
+                );
+            }
+        }
+    }
 
     #[test]
     fn table_reproduces_direct_albedo_between_nodes() {

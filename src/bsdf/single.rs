@@ -95,4 +95,9 @@ impl Brdf for SingleBounce<f64> {
     fn pdf(&self, wi: Vec3<f64>, wo: Vec3<f64>) -> f64 {
         SingleBounce::pdf(self, wi, wo)
     }
+
+    /// `F G2 / G1(wi)` in [0, 1], continuous in `u` (PHYSICS.md "single").
+    fn smooth_sample_weight(&self) -> bool {
+        true
+    }
 }

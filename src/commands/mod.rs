@@ -8,6 +8,7 @@ pub mod fit;
 pub mod images;
 pub mod lobe;
 pub mod output;
+pub mod stress;
 pub mod synth;
 
 use crate::bsdf::Model;
