@@ -26,6 +26,8 @@ pub mod heitz;
 pub mod kulla_conty;
 pub mod lobe_mixture;
 mod position_free;
+#[cfg(test)]
+mod properties;
 pub mod roulette;
 pub mod single;
 #[cfg(test)]
