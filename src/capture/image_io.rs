@@ -184,8 +184,20 @@ impl ImageKind {
 /// EXR: the R, G, B channels of the first layer (alpha and other channels ignored).
 /// PNG/JPEG: 8 or 16 bit, greyscale expanded to RGB, alpha ignored; a pixel is saturated when
 /// any channel holds the format maximum.
+/// Errors name the file and say what was expected (a missing file, a folder, a truncated or
+/// mislabelled file).
 pub fn load_image(path: &Path, encoding: ColorEncoding) -> Result<LinearImage> {
-    match ImageKind::of_supported(path)? {
+    let kind = ImageKind::of_supported(path)?;
+    let metadata = std::fs::metadata(path)
+        .map_err(|e| Error::io(path, format!("{e}; expected an image file here")))?;
+    if metadata.is_dir() {
+        return Err(Error::invalid(
+            path,
+            "file type",
+            "is a folder; expected an image file",
+        ));
+    }
+    match kind {
         ImageKind::Exr => load_exr(path, encoding),
         ImageKind::Integer => load_integer_image(path, encoding),
     }
@@ -212,7 +224,11 @@ fn load_exr(path: &Path, encoding: ColorEncoding) -> Result<LinearImage> {
         .from_file(path)
         .map_err(|e| match e {
             exr::error::Error::Io(io) => Error::io(path, io),
-            other => Error::invalid(path, "EXR data", other.to_string()),
+            other => Error::invalid(
+                path,
+                "EXR data",
+                format!("{other}; expected a complete OpenEXR file with R, G, B channels"),
+            ),
         })?;
     let mut decoded = image.layer_data.channel_data.pixels;
     if encoding != ColorEncoding::Linear {
@@ -229,7 +245,13 @@ fn load_integer_image(path: &Path, encoding: ColorEncoding) -> Result<LinearImag
         .and_then(|reader| reader.with_guessed_format())
         .map_err(|e| Error::io(path, e))?
         .decode()
-        .map_err(|e| Error::invalid(path, "image data", e.to_string()))?;
+        .map_err(|e| {
+            Error::invalid(
+                path,
+                "image data",
+                format!("{e}; expected a complete PNG or JPEG file"),
+            )
+        })?;
     let (width, height) = (decoded.width() as usize, decoded.height() as usize);
     let (rgb, saturated) = match decoded.color() {
         ColorType::L16 | ColorType::La16 | ColorType::Rgb16 | ColorType::Rgba16 => {
