@@ -298,12 +298,12 @@ fn bad_photo_sets_are_refused_by_every_command_that_reads_them() {
     let all_nan = fx.set_variant("all-nan", |f| {
         photos(f, "exr")
             .iter()
-            .for_each(|p| edit_exr(&p, |rgb| rgb.fill([f32::NAN; 3])));
+            .for_each(|p| edit_exr(p, |rgb| rgb.fill([f32::NAN; 3])));
     });
     let all_black = fx.set_variant("all-black", |f| {
         photos(f, "exr")
             .iter()
-            .for_each(|p| edit_exr(&p, |rgb| rgb.fill([0.0; 3])));
+            .for_each(|p| edit_exr(p, |rgb| rgb.fill([0.0; 3])));
     });
     let all_saturated = fx.manifest_variant("all-saturated", |t| t.replace(".exr", ".png"));
     for photo in photos(Path::new(&all_saturated), "png") {
