@@ -1,7 +1,8 @@
 //! Fuzzing the parsers (issue #6 item 5): arbitrary bytes, and valid inputs with random
 //! mutations, fed straight to the library's loaders. Every loader must return `Ok` or `Err`;
 //! a panic (or an abort) fails the test. proptest shrinks a failure to a minimal input and
-//! stores its seed under `proptest-regressions/`, so it is replayed on every later run.
+//! prints it: fix the root cause and keep the input as a unit test of the loader (as
+//! `image_io`'s test of an EXR header claiming too many pixels, found here).
 //!
 //! | property | seeds | loader |
 //! | --- | --- | --- |
@@ -21,6 +22,7 @@ use bouncefit::export::{gltf, json, materialx, mitsuba, Conversion};
 use bouncefit::material::Material;
 use bouncefit::shading::ShadingRecords;
 use proptest::prelude::*;
+use proptest::test_runner::TestRunner;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -321,44 +323,46 @@ fn image_seeds() -> &'static [(String, Vec<u8>)] {
     })
 }
 
-/// A folder of its own for each property (cases overwrite the files of the one before: creating
-/// and removing a temporary folder per case would cost more than the parsing), in memory
+/// A scratch folder for one property's cases (each case overwrites the files of the one before:
+/// creating and removing a folder per case would cost more than the parsing), in memory
 /// (`/dev/shm`) where there is one: on a busy disk each small write can take milliseconds.
-fn scratch(property: &str) -> PathBuf {
-    static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
-    let root = ROOT.get_or_init(|| {
-        let memory = Path::new("/dev/shm");
-        if memory.is_dir() {
-            tempfile::tempdir_in(memory).unwrap()
-        } else {
-            tempfile::tempdir().unwrap()
-        }
-    });
-    let folder = root.path().join(property);
-    std::fs::create_dir_all(&folder).unwrap();
-    folder
+fn scratch_folder() -> tempfile::TempDir {
+    let memory = Path::new("/dev/shm");
+    if memory.is_dir() {
+        tempfile::tempdir_in(memory).unwrap()
+    } else {
+        tempfile::tempdir().unwrap()
+    }
 }
 
-/// `cases` per property, times `BOUNCEFIT_FUZZ_SCALE` (default 1) for longer runs:
-/// `BOUNCEFIT_FUZZ_SCALE=100 cargo test --release --test fuzz_parsers`.
-fn config(cases: u32) -> ProptestConfig {
+/// Runs `property` on `cases` values of `strategy` (times `BOUNCEFIT_FUZZ_SCALE`, default 1,
+/// for longer runs: `BOUNCEFIT_FUZZ_SCALE=100 cargo test --release --test fuzz_parsers`) in a
+/// scratch folder removed afterwards. A panic fails the test with the shrunk, minimal input.
+fn fuzz<S: Strategy>(cases: u32, strategy: S, property: impl Fn(&Path, S::Value)) {
     let scale = std::env::var("BOUNCEFIT_FUZZ_SCALE")
         .ok()
         .and_then(|s| s.parse::<u32>().ok())
         .unwrap_or(1);
-    ProptestConfig {
+    let config = ProptestConfig {
         cases: cases.saturating_mul(scale),
+        failure_persistence: None,
         ..ProptestConfig::default()
+    };
+    let scratch = scratch_folder();
+    let result = TestRunner::new(config).run(&strategy, |value| {
+        property(scratch.path(), value);
+        Ok(())
+    });
+    if let Err(failure) = result {
+        panic!("{failure}");
     }
 }
 
-proptest! {
-    #![proptest_config(config(4000))]
-
-    /// Arbitrary bytes under every name a loader looks for.
-    #[test]
-    fn arbitrary_bytes(bytes in prop::collection::vec(any::<u8>(), 0..512)) {
-        let dir = scratch("arbitrary");
+/// Arbitrary bytes under every name a loader looks for.
+#[test]
+fn arbitrary_bytes() {
+    let bytes = prop::collection::vec(any::<u8>(), 0..512);
+    fuzz(4000, bytes, |dir, bytes| {
         for name in ["capture.toml", "m.json", "x.exr", "x.png", "x.jpg"] {
             std::fs::write(dir.join(name), &bytes).unwrap();
         }
@@ -368,86 +372,88 @@ proptest! {
             load_images(&dir.join(name));
         }
         for file in ["camera_pos.txt", "parameters.json"] {
-            let folder = scratch(&format!("arbitrary-{file}"));
+            let folder = dir.join(format!("arbitrary-{file}"));
+            std::fs::create_dir_all(&folder).unwrap();
             std::fs::write(folder.join(file), &bytes).unwrap();
             open_capture(&folder);
         }
-    }
+    });
 }
 
-proptest! {
-    #![proptest_config(config(4000))]
-
-    #[test]
-    fn mutated_manifests(
-        seed in 0..4usize,
-        mutations in prop::collection::vec(text_mutation(), 1..6),
-    ) {
-        static SEEDS: OnceLock<Vec<Vec<u8>>> = OnceLock::new();
-        let seeds = SEEDS.get_or_init(|| read_all(&[
-            "datasets/sources/copper-flash.capture.toml",
-            "datasets/sources/aluminium-pinhole.capture.toml",
-            "datasets/copper-flash/capture.toml",
-            "datasets/aluminium-pinhole/capture.toml",
-        ]));
-        let path = scratch("manifests").join("capture.toml");
+#[test]
+fn mutated_manifests() {
+    let seeds = read_all(&[
+        "datasets/sources/copper-flash.capture.toml",
+        "datasets/sources/aluminium-pinhole.capture.toml",
+        "datasets/copper-flash/capture.toml",
+        "datasets/aluminium-pinhole/capture.toml",
+    ]);
+    let cases = (0..seeds.len(), prop::collection::vec(text_mutation(), 1..6));
+    fuzz(4000, cases, |dir, (seed, mutations)| {
+        let path = dir.join("capture.toml");
         std::fs::write(&path, mutate(seeds[seed].clone(), &mutations)).unwrap();
         open_capture(&path);
-    }
+    });
+}
 
-    #[test]
-    fn mutated_materialgan_folders(
-        json in any::<bool>(),
-        file in any::<usize>(),
-        mutations in prop::collection::vec(text_mutation(), 1..4),
-    ) {
-        let dir = scratch(if json { "materialgan-json" } else { "materialgan-txt" });
+#[test]
+fn mutated_materialgan_folders() {
+    let cases = (
+        any::<bool>(),
+        any::<usize>(),
+        prop::collection::vec(text_mutation(), 1..4),
+    );
+    fuzz(4000, cases, |dir, (json, file, mutations)| {
+        let dir = dir.join(if json { "json" } else { "txt" });
+        std::fs::create_dir_all(&dir).unwrap();
         let calibration = materialgan_calibration(json);
         let target = file % calibration.len();
         for (i, (name, bytes)) in calibration.into_iter().enumerate() {
-            let bytes = if i == target { mutate(bytes, &mutations) } else { bytes };
+            let bytes = if i == target {
+                mutate(bytes, &mutations)
+            } else {
+                bytes
+            };
             std::fs::write(dir.join(name), bytes).unwrap();
         }
         for photo in ["00.png", "01.png"] {
             std::fs::write(dir.join(photo), &image_seeds()[0].1).unwrap();
         }
         open_capture(&dir);
-    }
-
-    #[test]
-    fn mutated_images(
-        seed in any::<usize>(),
-        mutations in prop::collection::vec(byte_mutation(), 1..4),
-    ) {
-        let (name, bytes) = &image_seeds()[seed % image_seeds().len()];
-        let path = scratch("images").join(name);
-        std::fs::write(&path, mutate(bytes.clone(), &mutations)).unwrap();
-        load_images(&path);
-    }
+    });
 }
 
-proptest! {
-    // Fewer cases: a valid material goes on through every export format (about 2 ms).
-    #![proptest_config(config(1500))]
+#[test]
+fn mutated_images() {
+    let cases = (
+        0..image_seeds().len(),
+        prop::collection::vec(byte_mutation(), 1..4),
+    );
+    fuzz(4000, cases, |dir, (seed, mutations)| {
+        let (name, bytes) = &image_seeds()[seed];
+        let path = dir.join(name);
+        std::fs::write(&path, mutate(bytes.clone(), &mutations)).unwrap();
+        load_images(&path);
+    });
+}
 
-    #[test]
-    fn mutated_materials(
-        seed in 0..6usize,
-        mutations in prop::collection::vec(text_mutation(), 1..6),
-    ) {
-        static SEEDS: OnceLock<Vec<Vec<u8>>> = OnceLock::new();
-        let seeds = SEEDS.get_or_init(|| read_all(&[
-            "fits/copper-flash.json",
-            "fits/aluminium-pinhole.json",
-            "datasets/copper-flash/material.json",
-            "datasets/sources/aluminium-a05.material.json",
-            "tests/data/export/copper-flash-conductor.fit.json",
-            "tests/data/export/copper-flash-kulla-conty.fit.json",
-        ]));
-        let path = scratch("materials").join("m.json");
+/// Fewer cases: a valid material goes on through every export format (about 2 ms).
+#[test]
+fn mutated_materials() {
+    let seeds = read_all(&[
+        "fits/copper-flash.json",
+        "fits/aluminium-pinhole.json",
+        "datasets/copper-flash/material.json",
+        "datasets/sources/aluminium-a05.material.json",
+        "tests/data/export/copper-flash-conductor.fit.json",
+        "tests/data/export/copper-flash-kulla-conty.fit.json",
+    ]);
+    let cases = (0..seeds.len(), prop::collection::vec(text_mutation(), 1..6));
+    fuzz(1500, cases, |dir, (seed, mutations)| {
+        let path = dir.join("m.json");
         std::fs::write(&path, mutate(seeds[seed].clone(), &mutations)).unwrap();
         load_material(&path);
-    }
+    });
 }
 
 #[test]
