@@ -110,10 +110,64 @@ enum AlphaField {
 fn deserialize_alpha<'de, D: serde::Deserializer<'de>>(
     d: D,
 ) -> std::result::Result<[f64; 2], D::Error> {
-    Ok(match AlphaField::deserialize(d)? {
-        AlphaField::Isotropic(a) => [a, a],
-        AlphaField::Anisotropic(a) => a,
-    })
+    AlphaField::deserialize(d).map(<[f64; 2]>::from)
+}
+
+impl From<AlphaField> for [f64; 2] {
+    fn from(alpha: AlphaField) -> [f64; 2] {
+        match alpha {
+            AlphaField::Isotropic(a) => [a, a],
+            AlphaField::Anisotropic(a) => a,
+        }
+    }
+}
+
+/// The keys of a material file.
+const MATERIAL_FIELDS: [&str; 6] = ["model", "ndf", "height", "alpha", "fresnel", "diffuse"];
+
+/// The key every fit file has and no material file: its extra keys are not warned about.
+const FIT_FILE_MARKER: &str = "version";
+
+/// serde_json's message without its trailing "at line L column C" (the caller names the place).
+fn json_message(error: &serde_json::Error) -> String {
+    let message = error.to_string();
+    match message.rfind(" at line ") {
+        Some(end) => message[..end].to_string(),
+        None => message,
+    }
+}
+
+/// Removes `key` from a material file's `fields` and deserialises it; a wrong value is an
+/// error naming the key and what was `expected`.
+fn optional<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    fields: &mut serde_json::Map<String, serde_json::Value>,
+    key: &str,
+    expected: &str,
+) -> Result<Option<T>> {
+    fields
+        .remove(key)
+        .map(|value| {
+            serde_json::from_value(value).map_err(|e| {
+                Error::invalid(
+                    path,
+                    key,
+                    format!("{}; expected {expected}", json_message(&e)),
+                )
+            })
+        })
+        .transpose()
+}
+
+/// Like [`optional`], but a missing key is an error.
+fn required<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    fields: &mut serde_json::Map<String, serde_json::Value>,
+    key: &str,
+    expected: &str,
+) -> Result<T> {
+    optional(path, fields, key, expected)?
+        .ok_or_else(|| Error::invalid(path, key, format!("missing; expected {expected}")))
 }
 
 /// A homogeneous material: a specular microfacet model plus an optional Lambertian layer,
@@ -137,18 +191,75 @@ pub struct Material {
 impl Material {
     /// Read and validate a material or fit file; errors name the file and the field.
     pub fn load(path: &Path) -> Result<Self> {
+        Material::load_with_warnings(path).map(|(material, _)| material)
+    }
+
+    /// [`Material::load`], also returning a warning for every key of a material file that is
+    /// not a material field (a misspelt `difuse` would otherwise be silently ignored). Fit
+    /// files, recognised by their `version` field, carry many more fields and get no warnings.
+    ///
+    /// Each field is read on its own so that a wrong type names its key; JSON syntax errors
+    /// name the line and column.
+    pub fn load_with_warnings(path: &Path) -> Result<(Self, Vec<String>)> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let material: Material = serde_json::from_str(&text).map_err(|e| {
+        let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
             Error::invalid(
                 path,
                 format!("line {} column {}", e.line(), e.column()),
-                e.to_string(),
+                format!("{}; expected a JSON material file", json_message(&e)),
             )
         })?;
+        let serde_json::Value::Object(mut fields) = value else {
+            return Err(Error::invalid(
+                path,
+                "top level",
+                "expected a JSON object {\"model\": ..., \"alpha\": ..., \"fresnel\": ...}",
+            ));
+        };
+        let warnings = if fields.contains_key(FIT_FILE_MARKER) {
+            Vec::new()
+        } else {
+            fields
+                .keys()
+                .filter(|key| !MATERIAL_FIELDS.contains(&key.as_str()))
+                .map(|key| format!("{}: {key}: unknown key, ignored", path.display()))
+                .collect()
+        };
+        let material = Material {
+            model: required(
+                path,
+                &mut fields,
+                "model",
+                "a model name such as \"single\"",
+            )?,
+            ndf: optional(path, &mut fields, "ndf", "\"ggx\" or \"beckmann\"")?.unwrap_or_default(),
+            height: optional(
+                path,
+                &mut fields,
+                "height",
+                "\"correlated\" or \"uncorrelated\"",
+            )?
+            .unwrap_or_default(),
+            alpha: required::<AlphaField>(
+                path,
+                &mut fields,
+                "alpha",
+                "a number or [alpha_x, alpha_y]",
+            )?
+            .into(),
+            fresnel: required(
+                path,
+                &mut fields,
+                "fresnel",
+                "an object such as {\"kind\": \"conductor\", \"eta\": [r, g, b], \"k\": [r, g, b]}",
+            )?,
+            diffuse: optional(path, &mut fields, "diffuse", "[r, g, b] in [0, 1]")?
+                .unwrap_or_default(),
+        };
         material
             .validate()
             .map_err(|(field, msg)| Error::invalid(path, field, msg))?;
-        Ok(material)
+        Ok((material, warnings))
     }
 
     /// Check physical ranges; returns the offending field and the reason.

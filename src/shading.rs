@@ -44,7 +44,7 @@ impl PhotoSpan {
 /// Why a pixel does not enter the loss (weight 0). Counted per photo set for reports.
 ///
 /// Each excluded pixel is counted once, under the first reason that applies, in the order
-/// outside_sample, masked, saturated, non_finite.
+/// outside_sample, masked, saturated, non_finite, negative.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct ExclusionCounts {
     /// Zero in the photo's keep-mask.
@@ -53,6 +53,9 @@ pub struct ExclusionCounts {
     pub saturated: usize,
     /// Some channel NaN or infinite (floating-point images).
     pub non_finite: usize,
+    /// Some channel below zero (floating-point images): not a radiance, e.g. over-subtracted
+    /// dark frames.
+    pub negative: usize,
     /// No sub-sample of the pixel sees the sample rectangle.
     pub outside_sample: usize,
 }
@@ -62,6 +65,7 @@ impl std::ops::AddAssign for ExclusionCounts {
         self.masked += other.masked;
         self.saturated += other.saturated;
         self.non_finite += other.non_finite;
+        self.negative += other.negative;
         self.outside_sample += other.outside_sample;
     }
 }
@@ -271,6 +275,8 @@ impl ShadingRecords {
                 &mut counts.saturated
             } else if !finite {
                 &mut counts.non_finite
+            } else if value.iter().any(|v| *v < 0.0) {
+                &mut counts.negative
             } else {
                 continue;
             };
@@ -646,6 +652,7 @@ mod tests {
                 masked: 3,
                 saturated: 1,
                 non_finite: 0,
+                negative: 0,
                 outside_sample: 0
             }
         );
@@ -664,6 +671,7 @@ mod tests {
         let mut hdr = vec![[0.5f32; 3]; 12];
         hdr[5] = [f32::NAN, 0.0, 0.0];
         hdr[6] = [0.0, f32::INFINITY, 0.0];
+        hdr[7] = [0.5, -1e-3, 0.5];
         write_exr(&dir.path().join("h.exr"), &hdr, 4, 3).unwrap();
         let mut second = c.photos[0].clone();
         (second.image, second.saturated_mask, second.color) =
@@ -677,11 +685,12 @@ mod tests {
                 masked: 0,
                 saturated: 2,
                 non_finite: 2,
+                negative: 1,
                 outside_sample: 0
             }
         );
         let zero: Vec<usize> = (0..24).filter(|&p| r.weight[p] == 0.0).collect();
-        assert_eq!(zero, vec![3, 11, 17, 18]);
+        assert_eq!(zero, vec![3, 11, 17, 18, 19]);
         assert_eq!(
             (r.target[17], r.target[18], r.target[12]),
             ([0.0; 3], [0.0; 3], [0.5; 3])

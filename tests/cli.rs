@@ -333,6 +333,7 @@ fn lobe_writes_a_picture_and_an_energy_table_that_adds_up() {
             "--samples",
             "16384",
             "--json",
+            "--force",
         ]);
         let v: serde_json::Value = serde_json::from_str(&out).unwrap();
         assert!(png.exists());

@@ -184,15 +184,58 @@ impl ImageKind {
 /// EXR: the R, G, B channels of the first layer (alpha and other channels ignored).
 /// PNG/JPEG: 8 or 16 bit, greyscale expanded to RGB, alpha ignored; a pixel is saturated when
 /// any channel holds the format maximum.
+/// Errors name the file and say what was expected (a missing file, a folder, a truncated or
+/// mislabelled file).
 pub fn load_image(path: &Path, encoding: ColorEncoding) -> Result<LinearImage> {
-    match ImageKind::of_supported(path)? {
-        ImageKind::Exr => load_exr(path, encoding),
+    let kind = ImageKind::of_supported(path)?;
+    let metadata = std::fs::metadata(path)
+        .map_err(|e| Error::io(path, format!("{e}; expected an image file here")))?;
+    if metadata.is_dir() {
+        return Err(Error::invalid(
+            path,
+            "file type",
+            "is a folder; expected an image file",
+        ));
+    }
+    match kind {
+        ImageKind::Exr => load_exr(path, encoding, metadata.len()),
         ImageKind::Integer => load_integer_image(path, encoding),
     }
 }
 
-fn load_exr(path: &Path, encoding: ColorEncoding) -> Result<LinearImage> {
+/// Most pixels an EXR file of one byte may claim: deflate (ZIP), the best-compressing of
+/// OpenEXR's codecs on constant data, shrinks at most 1032:1, and every pixel holds at least
+/// one 2-byte sample, so a real file has at most 1032 / 2 pixels per byte; twice that is
+/// allowed.
+const EXR_PIXELS_PER_FILE_BYTE: usize = 1032;
+
+/// Refuses an EXR whose header claims more pixels than its size can hold (a damaged or
+/// hostile header would otherwise make the decoder allocate its claimed size and abort).
+fn check_exr_size(path: &Path, file_bytes: u64) -> Result<()> {
+    let invalid = |message: String| Error::invalid(path, "EXR data", message);
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| invalid(format!("{e}; expected an OpenEXR file")))?;
+    let limit = usize::try_from(file_bytes)
+        .unwrap_or(usize::MAX)
+        .saturating_mul(EXR_PIXELS_PER_FILE_BYTE);
+    for header in &meta.headers {
+        let (width, height) = (header.layer_size.0, header.layer_size.1);
+        if width
+            .checked_mul(height)
+            .is_none_or(|pixels| pixels > limit)
+        {
+            return Err(invalid(format!(
+                "the header claims {width}x{height} pixels, more than a {file_bytes}-byte \
+                 file can hold; expected an undamaged OpenEXR file"
+            )));
+        }
+    }
+    Ok(())
+}
+
+fn load_exr(path: &Path, encoding: ColorEncoding, file_bytes: u64) -> Result<LinearImage> {
     use exr::prelude::{ReadChannels, ReadLayers};
+    check_exr_size(path, file_bytes)?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -212,7 +255,11 @@ fn load_exr(path: &Path, encoding: ColorEncoding) -> Result<LinearImage> {
         .from_file(path)
         .map_err(|e| match e {
             exr::error::Error::Io(io) => Error::io(path, io),
-            other => Error::invalid(path, "EXR data", other.to_string()),
+            other => Error::invalid(
+                path,
+                "EXR data",
+                format!("{other}; expected a complete OpenEXR file with R, G, B channels"),
+            ),
         })?;
     let mut decoded = image.layer_data.channel_data.pixels;
     if encoding != ColorEncoding::Linear {
@@ -229,7 +276,13 @@ fn load_integer_image(path: &Path, encoding: ColorEncoding) -> Result<LinearImag
         .and_then(|reader| reader.with_guessed_format())
         .map_err(|e| Error::io(path, e))?
         .decode()
-        .map_err(|e| Error::invalid(path, "image data", e.to_string()))?;
+        .map_err(|e| {
+            Error::invalid(
+                path,
+                "image data",
+                format!("{e}; expected a complete PNG or JPEG file"),
+            )
+        })?;
     let (width, height) = (decoded.width() as usize, decoded.height() as usize);
     let (rgb, saturated) = match decoded.color() {
         ColorType::L16 | ColorType::La16 | ColorType::Rgb16 | ColorType::Rgba16 => {
@@ -531,6 +584,28 @@ mod tests {
         let mid = (128.0f64 / 255.0).powf(2.2) as f32;
         assert_eq!(img.rgb, vec![[0.0; 3], [mid; 3], [1.0; 3]]);
         assert_eq!(img.saturated, vec![false, false, true]);
+    }
+
+    #[test]
+    fn an_exr_header_claiming_more_pixels_than_the_file_holds_is_refused() {
+        // Found by tests/fuzz_parsers.rs: one flipped byte in the data window made the
+        // decoder allocate 174 GB and abort.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("huge.exr");
+        write_exr(&path, &[[0.5; 3]; 12], 4, 3).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        let name = b"dataWindow\0box2i\0";
+        let at = bytes.windows(name.len()).position(|w| w == name).unwrap() + name.len();
+        // After the attribute's size (4 bytes): x_min, y_min, x_max, y_max as i32.
+        bytes[at + 16..at + 20].copy_from_slice(&100_000_000i32.to_le_bytes());
+        std::fs::write(&path, &bytes).unwrap();
+        let err = load_image(&path, ColorEncoding::Linear)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("huge.exr") && err.contains("4x100000001"),
+            "{err}"
+        );
     }
 
     #[test]

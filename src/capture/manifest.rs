@@ -59,8 +59,14 @@ impl<'a> Table<'a> {
         key: &str,
         check: impl FnOnce(T) -> Result<U, String>,
     ) -> Result<U> {
-        self.optional(key, check)?
-            .ok_or_else(|| self.error(key, "missing"))
+        self.optional(key, check)?.ok_or_else(|| {
+            let table = if self.path.is_empty() {
+                "the top level".to_string()
+            } else {
+                self.path.clone()
+            };
+            self.error(key, format!("missing; add `{key} = ...` to {table}"))
+        })
     }
 
     /// Like [`Table::optional`], remembering where the value came from.
@@ -86,14 +92,19 @@ impl<'a> Table<'a> {
     }
 
     fn required_sub_table(&mut self, key: &str) -> Result<Table<'a>> {
+        let field = self.field(key);
         self.sub_table(key)?
-            .ok_or_else(|| self.error(key, "missing"))
+            .ok_or_else(|| self.error(key, format!("missing; add a [{field}] table")))
     }
 
     /// An array of tables (`[[photo]]`), each with the path `key[i]`.
     fn tables(&mut self, key: &str) -> Result<Vec<Table<'a>>> {
         let path = self.field(key);
-        let list = self.required::<Vec<toml::Table>, _>(key, Ok)?;
+        let list = self
+            .optional::<Vec<toml::Table>, _>(key, Ok)?
+            .ok_or_else(|| {
+                self.error(key, format!("missing; add at least one [[{path}]] table"))
+            })?;
         Ok(list
             .into_iter()
             .enumerate()

@@ -32,7 +32,7 @@ pub struct AlbedoArgs {
     #[command(flatten)]
     pub material: MaterialArgs,
     /// Incidence angle from the normal, degrees, in [0, 90).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub theta_i: f64,
     /// Evaluations (analytic models: a product quadrature of about this many nodes).
     #[arg(long, default_value_t = 65_536)]

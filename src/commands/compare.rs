@@ -15,7 +15,6 @@ use super::images::display_exposure;
 use super::output::StagedFolder;
 use crate::bsdf::Model;
 use crate::capture::atomic_file::write_atomically;
-use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::holdout::{check_fold_count, cross_validate};
 use crate::fit::selection::{HeldOutErrors, HeldOutRanking};
@@ -60,8 +59,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
             ));
         }
     }
-    let capture = Capture::open(&args.capture)?;
-    super::synth::warn_all(&capture);
+    let capture = super::inputs::open_capture(&args.capture)?;
     if let Some(folds) = args.holdout {
         check_fold_count(folds, capture.photos.len())?;
     }

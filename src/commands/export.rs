@@ -7,13 +7,13 @@
 //! default flash setup; the scene's comment says which and why. The output is written
 //! atomically and replaces an existing file only with `--force`.
 
-use super::output::check_overwrite;
+use super::inputs::load_material;
+use super::output::check_output_file;
 use crate::capture::atomic_file::write_atomically;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::export::mitsuba::Scene;
 use crate::export::{gltf, json, materialx, mitsuba, Conversion, ExportFormat};
-use crate::material::Material;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -39,8 +39,8 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
             format!("{msg}, exporting {}", args.input.display()),
         )
     })?;
-    check_overwrite(&args.output, args.force)?;
-    let material = Material::load(&args.input)?;
+    check_output_file(&args.output, args.force)?;
+    let material = load_material(&args.input)?;
     let conversion = Conversion::new(&material);
     let text = match format {
         ExportFormat::Json => json::document(&conversion),

@@ -171,19 +171,51 @@ impl FitOptionArgs {
     }
 }
 
-/// The photo set's shading records with targets, refusing a set with no usable pixel.
+/// The photo set's shading records with targets, refusing a set with no usable pixel (all
+/// excluded, the counts by reason in the message) or whose usable pixels are all black, which
+/// no material with positive reflectance can fit.
 pub fn load_records(
     capture_path: &Path,
     capture: &Capture,
     pixel_samples: usize,
 ) -> Result<ShadingRecords> {
     let records = ShadingRecords::build(capture, pixel_samples, true)?;
-    if records.weight.iter().all(|w| *w <= 0.0) {
+    let usable = || {
+        records
+            .target
+            .iter()
+            .zip(&records.weight)
+            .filter(|(_, w)| **w > 0.0)
+    };
+    if usable().next().is_none() {
+        let e = records.excluded;
         return Err(Error::invalid(
             capture_path,
             "photos",
-            "every pixel is excluded (masked, saturated, non-finite or outside the sample)",
+            format!(
+                "every pixel is excluded ({} outside the sample, {} masked, {} saturated, \
+                 {} non-finite, {} negative); expected photos with usable pixels: check the \
+                 cameras, the masks, and retake saturated photos at a lower exposure",
+                e.outside_sample, e.masked, e.saturated, e.non_finite, e.negative
+            ),
         ));
+    }
+    if usable().all(|(t, _)| t.iter().all(|c| *c == 0.0)) {
+        return Err(Error::invalid(
+            capture_path,
+            "photos",
+            "every usable pixel is black (0 in every channel); expected photos of the lit \
+             sample: check the images, their exposure and the lights",
+        ));
+    }
+    let e = records.excluded;
+    if e.non_finite + e.negative > 0 {
+        eprintln!(
+            "warning: {}: photos: {} non-finite and {} negative pixels excluded from the fit",
+            capture_path.display(),
+            e.non_finite,
+            e.negative
+        );
     }
     Ok(records)
 }
@@ -347,14 +379,13 @@ impl<'a> FitFile<'a> {
 }
 
 pub fn run_fit(args: &FitArgs) -> Result<()> {
-    let capture = Capture::open(&args.capture)?;
-    super::synth::warn_all(&capture);
+    let capture = super::inputs::open_capture(&args.capture)?;
     let output = args
         .output
         .clone()
         .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
     check_overwrite(&output, args.force)?;
-    let residual_folder = output.with_extension("residuals");
+    let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
     let records = load_records(&args.capture, &capture, args.options.pixel_samples)?;
     let Some(done) = fit_and_sample(
         &records,
@@ -404,14 +435,10 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
             }
         })
         .collect();
-    let folder = StagedFolder::new(&residual_folder, true)?;
     let exposure = display_exposure(&records.target);
-    write_photo_images(&folder.path(""), &records, &residual, exposure, "")?;
-    if let Some(parent) = output.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
-    }
+    write_photo_images(&residual_folder.path(""), &records, &residual, exposure, "")?;
     file.write(&output)?;
-    folder.commit()?;
+    residual_folder.commit()?;
     done.remove_checkpoint()?;
     println!("{}", output.display());
     Ok(())

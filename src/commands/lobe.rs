@@ -16,11 +16,14 @@ pub struct LobeArgs {
     #[command(flatten)]
     pub material: MaterialArgs,
     /// Incidence angle of `wi` from the normal, degrees, in the xz-plane (light toward +x).
-    #[arg(long, default_value_t = 45.0)]
+    #[arg(long, default_value_t = 45.0, allow_negative_numbers = true)]
     pub theta_i: f64,
-    /// PNG of the lobe to write.
+    /// PNG of the lobe to write (atomically; an existing file only with --force).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
     /// Image side in pixels.
     #[arg(long, default_value_t = 256)]
     pub size: usize,
@@ -50,6 +53,19 @@ pub fn run_lobe(args: &LobeArgs) -> Result<()> {
     if args.size == 0 || args.size > 4096 {
         return Err(Error::argument("--size", "must be between 1 and 4096"));
     }
+    if let Some(&alpha) = args
+        .table_alphas
+        .iter()
+        .find(|a| !(a.is_finite() && **a > 0.0))
+    {
+        return Err(Error::argument(
+            "--table-alphas",
+            format!("{alpha} is not a roughness > 0"),
+        ));
+    }
+    if let Some(path) = &args.output {
+        super::output::check_output_file(path, args.force)?;
+    }
     let t = args.theta_i.to_radians();
     let wi = Vec3::new(t.sin(), 0.0, t.cos());
     if let Some(path) = &args.output {
@@ -57,12 +73,6 @@ pub fn run_lobe(args: &LobeArgs) -> Result<()> {
     }
     let mut rows = Vec::new();
     for &alpha in &args.table_alphas {
-        if !(alpha.is_finite() && alpha > 0.0) {
-            return Err(Error::argument(
-                "--table-alphas",
-                format!("{alpha} is not a roughness > 0"),
-            ));
-        }
         let m = Material {
             alpha: [alpha, alpha * material.alpha[1] / material.alpha[0]],
             ..material.clone()

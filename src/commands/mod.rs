@@ -6,6 +6,7 @@ pub mod compare;
 pub mod export;
 pub mod fit;
 pub mod images;
+pub mod inputs;
 pub mod lobe;
 pub mod output;
 pub mod stress;

@@ -2,12 +2,11 @@
 //! (re-render a photo set with a material or fit).
 
 use super::images::{display_exposure, write_photo_images};
+use super::inputs::{load_material, open_capture};
 use super::output::StagedFolder;
 use crate::albedo::rng_stream;
 use crate::capture::image_io::ColorEncoding;
-use crate::capture::Capture;
 use crate::error::{Error, Result};
-use crate::material::Material;
 use crate::render::render_all;
 use crate::shading::ShadingRecords;
 use rand_distr::{Distribution, StandardNormal};
@@ -25,7 +24,7 @@ pub struct SynthArgs {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Relative Gaussian noise: each channel becomes v (1 + SIGMA n), n ~ N(0, 1).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub noise: f64,
     /// Stratified sub-pixel samples per pixel (a perfect square).
     #[arg(long, default_value_t = 4)]
@@ -73,10 +72,10 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
             format!("must be a finite number >= 0, got {}", args.noise),
         ));
     }
-    let material = Material::load(&args.material)?;
-    let capture = Capture::open(&args.capture)?;
-    warn_all(&capture);
+    let material = load_material(&args.material)?;
+    let capture = open_capture(&args.capture)?;
     let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
+    let folder = StagedFolder::new(&args.output, args.force)?;
     let mut pixels = render_all(&material, &records, args.seed);
     if args.noise > 0.0 {
         for (p, v) in pixels.iter_mut().enumerate() {
@@ -87,7 +86,6 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
             }
         }
     }
-    let folder = StagedFolder::new(&args.output, args.force)?;
     let staging_root = folder.path("");
     if args.format == SynthFormat::Materialgan {
         crate::capture::materialgan_writer::write(&staging_root, &capture, &pixels)?;
@@ -131,12 +129,11 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
 }
 
 pub fn run_render(args: &RenderArgs) -> Result<()> {
-    let material = Material::load(&args.material)?;
-    let capture = Capture::open(&args.capture)?;
-    warn_all(&capture);
+    let material = load_material(&args.material)?;
+    let capture = open_capture(&args.capture)?;
     let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
-    let pixels = render_all(&material, &records, args.seed);
     let folder = StagedFolder::new(&args.output, args.force)?;
+    let pixels = render_all(&material, &records, args.seed);
     write_photo_images(
         &folder.path(""),
         &records,
@@ -151,11 +148,4 @@ pub fn run_render(args: &RenderArgs) -> Result<()> {
         args.output.display()
     );
     Ok(())
-}
-
-/// Print a capture's warnings (unknown keys and the like) on stderr.
-pub fn warn_all(capture: &Capture) {
-    for w in &capture.warnings {
-        eprintln!("warning: {w}");
-    }
 }

@@ -23,17 +23,47 @@ pub fn run_ok(args: &[&str]) -> String {
     String::from_utf8(out.stdout).unwrap()
 }
 
+/// Run the binary; returns the exit code, stdout and stderr.
+pub fn run(args: &[&str]) -> (Option<i32>, String, String) {
+    let out: Output = bin().args(args).output().expect("binary runs");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// Run the binary expecting the bad-input exit status 2 without a panic; returns stderr.
 pub fn run_bad(args: &[&str]) -> String {
-    let out: Output = bin().args(args).output().expect("binary runs");
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(
-        out.status.code(),
-        Some(2),
-        "bouncefit {args:?} should exit 2, stderr:\n{stderr}"
-    );
-    assert!(!stderr.contains("panicked"), "panic on bad input: {stderr}");
+    let (stderr, problems) = run_bad_problems(args);
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
     stderr
+}
+
+/// Runs a command that should fail on bad input; returns stderr and what is wrong with the
+/// failure (not exit status 2, a panic), so that a table of cases can report every broken one.
+pub fn run_bad_problems(args: &[&str]) -> (String, Vec<String>) {
+    let (code, _, stderr) = run(args);
+    let mut problems = Vec::new();
+    if code != Some(2) {
+        problems.push(format!(
+            "bouncefit {args:?} should exit 2, got {code:?}, stderr:\n{stderr}"
+        ));
+    }
+    if stderr.contains("panicked") {
+        problems.push(format!("panic on bad input: {stderr}"));
+    }
+    (stderr, problems)
+}
+
+/// Names of the entries of `folder`, sorted.
+pub fn folder_entries(folder: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(folder)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
 }
 
 pub fn read_json(path: &Path) -> serde_json::Value {
