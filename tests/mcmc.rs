@@ -274,6 +274,12 @@ fn a_resumed_run_repeats_an_uninterrupted_one() {
     let again = dir.path().join("again.json");
     args[3] = again.to_str().unwrap();
     run_ok(&args);
+    // Starting afresh over a stopped run's checkpoint is refused without --force.
+    let err = run_bad(&args);
+    assert!(
+        err.contains("state.json") && err.contains("--resume") && err.contains("--force"),
+        "{err}"
+    );
     let mut other = args.clone();
     other.retain(|a| !["--mcmc-stop-after", "70", "--mcmc-samples", "60"].contains(a));
     other.extend(["--resume", "--mcmc-samples", "61"]);

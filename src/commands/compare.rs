@@ -72,6 +72,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         &args.mcmc,
         &args.output,
         args.quiet,
+        args.force,
     )?
     else {
         return Ok(());

@@ -241,7 +241,8 @@ impl Fits {
 /// Fits every model of `models` to `records` and, with `--mcmc`, samples the posterior over
 /// them first (its MAP fits are reused when the likelihood saw every pixel). The sampler's
 /// checkpoint defaults to `output` with extension `.mcmc-checkpoint.json`. `None` when the
-/// sampler stopped early and left its checkpoint (hidden `--mcmc-stop-after`).
+/// sampler stopped early and left its checkpoint (hidden `--mcmc-stop-after`). A checkpoint
+/// left by an earlier run is continued only with `--resume` and replaced only with `force`.
 pub fn fit_and_sample(
     records: &ShadingRecords,
     models: &[Model],
@@ -249,6 +250,7 @@ pub fn fit_and_sample(
     mcmc: &McmcArgs,
     output: &Path,
     quiet: bool,
+    force: bool,
 ) -> Result<Option<Fits>> {
     if models.is_empty() {
         return Err(Error::argument("--models", "no model given"));
@@ -257,6 +259,13 @@ pub fn fit_and_sample(
         .checkpoint
         .clone()
         .unwrap_or_else(|| output.with_extension("mcmc-checkpoint.json"));
+    if mcmc.mcmc && !mcmc.resume && !force && checkpoint.exists() {
+        return Err(Error::invalid(
+            &checkpoint,
+            "checkpoint",
+            "an interrupted sampler run left this file; pass --resume to continue it or --force to start over",
+        ));
+    }
     let posterior = if mcmc.mcmc {
         let spaces: Vec<ParamSpace> = models.iter().map(|&m| options.space(m)).collect();
         let mut mcmc_options = options.mcmc_options(mcmc, models, checkpoint.clone());
@@ -394,6 +403,7 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         &args.mcmc,
         &output,
         args.quiet,
+        args.force,
     )?
     else {
         return Ok(());
