@@ -86,6 +86,29 @@ impl Camera {
         }
     }
 
+    /// The same camera with an image of `resolution` pixels: the same view of the scene, each
+    /// pixel-unit intrinsic (`fx`, `cx` and `fy`, `cy`) scaled by the ratio of widths and of
+    /// heights, so a world point lands at the same fraction of the image.
+    pub fn resampled(&self, resolution: [usize; 2]) -> Camera {
+        match self {
+            Camera::Pinhole(c) => {
+                let [sx, sy] = [0, 1].map(|i| resolution[i] as f64 / c.resolution[i] as f64);
+                Camera::Pinhole(Pinhole {
+                    fx: c.fx * sx,
+                    cx: c.cx * sx,
+                    fy: c.fy * sy,
+                    cy: c.cy * sy,
+                    resolution,
+                    ..c.clone()
+                })
+            }
+            Camera::Rectified(c) => Camera::Rectified(Rectified {
+                resolution,
+                ..c.clone()
+            }),
+        }
+    }
+
     /// The point of the plane z = 0 seen at pixel position `pixel`, or `None` when the pinhole
     /// ray does not reach the plane going downwards. The point may lie outside `sample`
     /// (only the rectified model uses `sample`, to scale pixels to lengths).
@@ -315,6 +338,42 @@ mod tests {
         let p = c.surface_point(&sample, [3.5, 7.5]);
         assert!((p.x - (3.5 / 30.0 - 0.5) * 6.0).abs() < 1e-15);
         assert!((p.y + (7.5 / 20.0 - 0.5) * 4.0).abs() < 1e-15);
+    }
+
+    /// A world point keeps its place as a fraction of the image when the image is resampled
+    /// (a wrong scale of the principal point or focal length would move it).
+    #[test]
+    fn resampled_cameras_see_points_at_the_same_image_fraction() {
+        let sample = Sample {
+            width: 8.0,
+            height: 6.0,
+        };
+        let mut pinhole = Pinhole::with_fov(
+            DVec3::new(2.0, -3.0, 15.0),
+            DVec3::new(0.5, 0.2, 0.0),
+            DVec3::Y,
+            35.0,
+            [64, 48],
+        );
+        pinhole.cx += 3.0;
+        pinhole.fx *= 1.2;
+        let rectified = Rectified {
+            position: DVec3::new(0.0, 0.0, 20.0),
+            resolution: [64, 48],
+        };
+        for camera in [Camera::Pinhole(pinhole), Camera::Rectified(rectified)] {
+            let larger = camera.resampled([256, 96]);
+            assert_eq!(larger.resolution(), [256, 96]);
+            assert_eq!(larger.position(), camera.position());
+            for world in [DVec3::new(1.0, -2.0, 0.0), DVec3::new(-3.5, 2.5, 0.0)] {
+                let (a, b) = (
+                    camera.project(&sample, world).unwrap(),
+                    larger.project(&sample, world).unwrap(),
+                );
+                assert!((b[0] - 4.0 * a[0]).abs() < 1e-9, "{a:?} {b:?}");
+                assert!((b[1] - 2.0 * a[1]).abs() < 1e-9, "{a:?} {b:?}");
+            }
+        }
     }
 
     proptest! {
