@@ -9,7 +9,8 @@
 //! (a conservative estimate of the error of the fine grid). Stochastic models and the lobe
 //! mixtures of the compensation models use jittered stratification of the first two dimensions
 //! and report the standard error of the mean (computed as for independent samples, which
-//! over-estimates it under stratification).
+//! over-estimates it under stratification). [`mean_value`] is the plain mean of repeated
+//! evaluations at one pair of directions, the estimate the stress sweep and the bench compare.
 
 use crate::bsdf::{Brdf, Rng};
 use crate::scalar::Vec3;
@@ -32,6 +33,40 @@ pub fn rng_stream(seed: u64, stream: u64) -> Rng {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     Rng::seed_from_u64(z ^ (z >> 31))
+}
+
+/// Mean of `n` evaluations of `f(wi, wo)` per channel, with the standard error of that mean
+/// (infinite for `n < 2`): a stochastic model's estimate of its value at one pair of
+/// directions, or an analytic model's value (standard error 0 up to rounding).
+pub fn mean_value(
+    brdf: &dyn Brdf,
+    wi: Vec3<f64>,
+    wo: Vec3<f64>,
+    n: usize,
+    rng: &mut Rng,
+) -> Estimate {
+    let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
+    for _ in 0..n {
+        let v = brdf.eval(wi, wo, rng).total();
+        for c in 0..3 {
+            sum[c] += v[c];
+            sum2[c] += v[c] * v[c];
+        }
+    }
+    let nf = n as f64;
+    let value = sum.map(|s| s / nf);
+    let stderr = [0, 1, 2].map(|c| {
+        if n > 1 {
+            ((sum2[c] / nf - value[c] * value[c]).max(0.0) / (nf - 1.0)).sqrt()
+        } else {
+            f64::INFINITY
+        }
+    });
+    Estimate {
+        value,
+        stderr,
+        samples: n,
+    }
 }
 
 /// Directional albedo of `brdf` for the unit direction `wi`, with about `samples` evaluations.

@@ -28,8 +28,8 @@
 //!   models have no sampling error, so their reference is the same formula in f64 and the
 //!   tested value the f32 evaluation: the deviation shows where a formula loses precision.
 
-use crate::albedo::{directional_albedo, rng_stream, Adjoint};
-use crate::bsdf::{differentiable, Brdf, Model, Rng};
+use crate::albedo::{directional_albedo, mean_value, rng_stream, Adjoint};
+use crate::bsdf::{differentiable, Brdf, Model};
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::{Height, NdfKind};
 use crate::scalar::Vec3;
@@ -341,34 +341,6 @@ impl Tally {
     }
 }
 
-/// Mean and standard error of `n` estimates of `f(wi, wo)` per channel.
-fn mean_estimate(
-    brdf: &dyn Brdf,
-    wi: Vec3<f64>,
-    wo: Vec3<f64>,
-    n: usize,
-    rng: &mut Rng,
-) -> ([f64; 3], [f64; 3]) {
-    let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
-    for _ in 0..n {
-        let v = brdf.eval(wi, wo, rng).total();
-        for c in 0..3 {
-            sum[c] += v[c];
-            sum2[c] += v[c] * v[c];
-        }
-    }
-    let nf = n as f64;
-    let mean = sum.map(|s| s / nf);
-    let se = [0, 1, 2].map(|c| {
-        if n > 1 {
-            ((sum2[c] / nf - mean[c] * mean[c]).max(0.0) / (nf - 1.0)).sqrt()
-        } else {
-            f64::INFINITY
-        }
-    });
-    (mean, se)
-}
-
 fn relative_deviation(value: f64, reference: f64) -> f64 {
     (value - reference).abs() / reference.abs().max(RELATIVE_FLOOR)
 }
@@ -412,14 +384,16 @@ fn run_query(model: Model, size: SweepSize, index: usize, q: &Query, seed: u64) 
 
     if brdf.is_stochastic() {
         if index % REFERENCE_STRIDE == 0 {
-            let (reference, ref_se) = mean_estimate(
+            let reference = mean_value(
                 brdf.as_ref(),
                 q.wi,
                 q.wo,
                 size.reference_samples(),
                 &mut rng,
             );
-            let (mean, se) = mean_estimate(brdf.as_ref(), q.wi, q.wo, 64, &mut rng);
+            let (reference, ref_se) = (reference.value, reference.stderr);
+            let estimate = mean_value(brdf.as_ref(), q.wi, q.wo, 64, &mut rng);
+            let (mean, se) = (estimate.value, estimate.stderr);
             for c in 0..3 {
                 if ref_se[c] <= 0.02 * reference[c].abs() {
                     let dev = relative_deviation(mean[c], reference[c]);
