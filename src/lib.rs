@@ -8,9 +8,11 @@
 //! - [`bsdf`]: the BRDF trait and one file per model;
 //! - [`capture`], [`shading`]: photo sets and the per-pixel records computed from them;
 //! - [`export`]: a material for Mitsuba 3, glTF and MaterialX;
-//! - [`stress`]: the numerical stress sweep of every model.
+//! - [`stress`]: the numerical stress sweep of every model;
+//! - [`bench`]: run time beside error of every model, and of render and fit jobs.
 
 pub mod albedo;
+pub mod bench;
 pub mod bsdf;
 pub mod capture;
 pub mod commands;

@@ -31,7 +31,7 @@ fn register_font() {
 }
 
 /// Draw into a `WIDTH x HEIGHT` white canvas with `draw` and write it to `path` as PNG.
-fn draw_png(
+pub(crate) fn draw_png(
     path: &Path,
     draw: impl FnOnce(
         &DrawingArea<BitMapBackend, plotters::coord::Shift>,
@@ -162,6 +162,20 @@ pub fn posterior_intervals(path: &Path, posteriors: &[(Model, &Posterior)]) -> R
     })
 }
 
+/// Share of pixels that are neither white nor grey (a plotted series is coloured): what the
+/// plot tests look for.
+#[cfg(test)]
+pub(crate) fn coloured_share(img: &image::RgbImage) -> f64 {
+    let coloured = img
+        .pixels()
+        .filter(|p| {
+            let [r, g, b] = p.0.map(i32::from);
+            (r - g).abs().max((g - b).abs()).max((r - b).abs()) > 60
+        })
+        .count();
+    coloured as f64 / (img.width() * img.height()) as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -170,18 +184,6 @@ mod tests {
     /// Decoded RGB pixels of a PNG.
     fn pixels(path: &Path) -> image::RgbImage {
         image::open(path).unwrap().to_rgb8()
-    }
-
-    /// Share of pixels that are neither white nor grey (a plotted series is coloured).
-    fn coloured_share(img: &image::RgbImage) -> f64 {
-        let coloured = img
-            .pixels()
-            .filter(|p| {
-                let [r, g, b] = p.0.map(i32::from);
-                (r - g).abs().max((g - b).abs()).max((r - b).abs()) > 60
-            })
-            .count();
-        coloured as f64 / (img.width() * img.height()) as f64
     }
 
     #[test]

@@ -1,0 +1,282 @@
+//! End-to-end jobs of `bouncefit bench` (issue #5 item 3): a render of a photo set and a fit of
+//! each model to a photo set, timed in wall and CPU seconds.
+//!
+//! | job | what is timed | skip |
+//! | --- | --- | --- |
+//! | `render` | [`render_all`] of the records of a capture template (built once, 1 sample per pixel, no targets) with the template's material under each model; after one untimed render, the median of repeated renders until [`RenderTiming::min_seconds`] have passed | `false`: every pixel; `true`: only the pixels that enter a loss (weight > 0; outside the sample they are 0) |
+//! | `fit` | [`fit_model`] of each model to a photo set (records built once, optionally halved in resolution `halvings` times); the final loss and `alpha_rel_error = (alpha - alpha_true) / alpha_true` against the set's `material.json` | always `true`: [`crate::fit::objective::Objective`] renders only the pixels with weight > 0 (masked, saturated, non-finite and outside pixels are skipped), and no option turns that off |
+//!
+//! `skipped_pixels` says how many pixels the skipping left out: on a rectified camera with no
+//! mask or saturated pixel (the bundled sets) it is 0, and the two render rows do the same work.
+
+use super::cpu_time::process_seconds;
+use crate::bsdf::Model;
+use crate::capture::Capture;
+use crate::error::Result;
+use crate::fit::{fit_model, FitOptions};
+use crate::material::Material;
+use crate::render::{render_all, render_pixels};
+use crate::shading::ShadingRecords;
+use serde::Serialize;
+use std::path::Path;
+use std::time::Instant;
+
+/// Which end-to-end job a row times.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum JobKind {
+    Render,
+    Fit,
+}
+
+/// One row of the job table (the `--json` contract of issue #5 plus context).
+#[derive(Clone, Debug, Serialize)]
+pub struct JobRow {
+    pub job: JobKind,
+    pub model: Model,
+    pub skip: bool,
+    /// Wall seconds of one job (renders: the median of `repeats`).
+    pub seconds: f64,
+    /// CPU seconds of the process per job, all threads.
+    pub cpu_seconds: f64,
+    pub repeats: usize,
+    /// Final loss of a fit (its `loss_kind`); `None` for renders.
+    pub loss: Option<f64>,
+    /// Fitted roughness and its signed relative error against the set's true roughness
+    /// (`None` without a `material.json` beside the set, and for renders).
+    pub alpha: Option<f64>,
+    pub alpha_rel_error: Option<f64>,
+    /// Loss evaluations of a fit.
+    pub evaluations: Option<usize>,
+    /// Resolution of the first photo, photo count, pixels worked on and pixels skipped.
+    pub resolution: [usize; 2],
+    pub photos: usize,
+    pub pixels: usize,
+    pub skipped_pixels: usize,
+}
+
+impl JobRow {
+    fn new(
+        job: JobKind,
+        model: Model,
+        skip: bool,
+        records: &ShadingRecords,
+        pixels: usize,
+    ) -> Self {
+        JobRow {
+            job,
+            model,
+            skip,
+            seconds: 0.0,
+            cpu_seconds: 0.0,
+            repeats: 0,
+            loss: None,
+            alpha: None,
+            alpha_rel_error: None,
+            evaluations: None,
+            resolution: records
+                .photos
+                .first()
+                .map_or([0, 0], |p| [p.width, p.height]),
+            photos: records.photos.len(),
+            pixels,
+            skipped_pixels: records.pixel_count() - pixels,
+        }
+    }
+}
+
+/// The records of the capture (template) at `path`, every photo resampled to `resolution`,
+/// one sample per pixel, without targets: what a render job renders.
+pub fn render_records(path: &Path, resolution: [usize; 2]) -> Result<ShadingRecords> {
+    let mut capture = Capture::open(path)?;
+    for photo in &mut capture.photos {
+        photo.camera = photo.camera.resampled(resolution);
+    }
+    ShadingRecords::build(&capture, 1, false)
+}
+
+/// The photo set at `path` with targets, halved in resolution `halvings` times, and the true
+/// material from the set's `material.json` when there is one.
+pub fn fit_records(
+    path: &Path,
+    pixel_samples: usize,
+    halvings: usize,
+) -> Result<(ShadingRecords, Option<Material>)> {
+    let capture = Capture::open(path)?;
+    let mut records = ShadingRecords::build(&capture, pixel_samples, true)?;
+    for _ in 0..halvings {
+        match records.coarsened() {
+            Some(coarser) => records = coarser,
+            None => break,
+        }
+    }
+    let truth = capture.root.join("material.json");
+    let truth = if truth.is_file() {
+        Some(Material::load(&truth)?)
+    } else {
+        None
+    };
+    Ok((records, truth))
+}
+
+/// How long to keep repeating a render.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderTiming {
+    /// Repeat until this much wall time has passed ...
+    pub min_seconds: f64,
+    /// ... or this many renders are done.
+    pub max_repeats: usize,
+}
+
+/// Time renders of `material` under `model` over `records`: without skipping (every pixel)
+/// and with it (pixels of weight > 0).
+pub fn render_jobs(
+    records: &ShadingRecords,
+    material: &Material,
+    model: Model,
+    timing: RenderTiming,
+    seed: u64,
+) -> [JobRow; 2] {
+    let material = Material {
+        model,
+        ..material.clone()
+    };
+    let used: Vec<usize> = (0..records.pixel_count())
+        .filter(|&p| records.weight[p] > 0.0)
+        .collect();
+    // One untimed render wakes the thread pool and touches the records.
+    std::hint::black_box(render_all(&material, records, seed));
+    [false, true].map(|skip| {
+        let mut row = JobRow::new(
+            JobKind::Render,
+            model,
+            skip,
+            records,
+            if skip {
+                used.len()
+            } else {
+                records.pixel_count()
+            },
+        );
+        let (started, cpu) = (Instant::now(), process_seconds());
+        let mut seconds = Vec::new();
+        while seconds.is_empty()
+            || (started.elapsed().as_secs_f64() < timing.min_seconds
+                && seconds.len() < timing.max_repeats)
+        {
+            let one = Instant::now();
+            let image = if skip {
+                render_pixels(&material, records, &used, seed)
+            } else {
+                render_all(&material, records, seed)
+            };
+            std::hint::black_box(image);
+            seconds.push(one.elapsed().as_secs_f64());
+        }
+        seconds.sort_by(f64::total_cmp);
+        row.repeats = seconds.len();
+        row.seconds = seconds[seconds.len() / 2];
+        row.cpu_seconds = (process_seconds() - cpu) / seconds.len() as f64;
+        row
+    })
+}
+
+/// Fit the model of `options` to `records` and time it.
+pub fn fit_job(
+    records: &ShadingRecords,
+    truth: Option<&Material>,
+    options: &FitOptions,
+) -> Result<JobRow> {
+    let used = records.weight.iter().filter(|&&w| w > 0.0).count();
+    let mut row = JobRow::new(JobKind::Fit, options.space.model, true, records, used);
+    let cpu = process_seconds();
+    let fit = fit_model(records, options)?;
+    row.cpu_seconds = process_seconds() - cpu;
+    row.seconds = fit.seconds;
+    row.repeats = 1;
+    row.loss = Some(fit.loss);
+    row.evaluations = Some(fit.evaluations);
+    let alpha = fit.material.alpha[0];
+    row.alpha = Some(alpha);
+    row.alpha_rel_error = truth.map(|t| (alpha - t.alpha[0]) / t.alpha[0]);
+    Ok(row)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::params::{FresnelFamily, ParamSpace};
+    use crate::fit::Optimizer;
+    use crate::loss::LossKind;
+    use crate::microfacet::{Height, NdfKind};
+
+    fn repo(path: &str) -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
+    }
+
+    /// The render template resampled to 32x32 gives 9 photos of 32x32 all inside the sample;
+    /// both render rows agree on the pixel counts, and the skipping row renders exactly the
+    /// pixels that the other does not skip.
+    #[test]
+    fn render_jobs_count_pixels_and_time_every_repeat() {
+        let records = render_records(
+            &repo("datasets/sources/copper-flash.capture.toml"),
+            [32, 32],
+        )
+        .unwrap();
+        assert_eq!(records.photos.len(), 9);
+        assert_eq!(records.pixel_count(), 9 * 32 * 32);
+        let material = Material::load(&repo("datasets/sources/copper-a03.material.json")).unwrap();
+        let timing = RenderTiming {
+            min_seconds: 0.0,
+            max_repeats: 3,
+        };
+        let [all, skipping] = render_jobs(&records, &material, Model::Single, timing, 0);
+        assert!(!all.skip && skipping.skip);
+        for row in [&all, &skipping] {
+            assert_eq!(row.pixels + row.skipped_pixels, 9 * 32 * 32);
+            assert_eq!(row.repeats, 1);
+            assert!(row.seconds > 0.0 && row.loss.is_none());
+        }
+        assert_eq!(
+            skipping.skipped_pixels, 0,
+            "a rectified camera sees only the sample"
+        );
+    }
+
+    /// A fit of `single` to the bundled copper set at 16x16 recovers the true roughness to a
+    /// few percent, and the row reports it as the signed error against `material.json`.
+    #[test]
+    fn fit_job_reports_the_error_against_the_true_roughness() {
+        let (records, truth) = fit_records(&repo("datasets/copper-flash"), 1, 3).unwrap();
+        assert_eq!(records.photos[0].width, 16);
+        let truth = truth.expect("the bundled set names its material");
+        let options = FitOptions {
+            space: ParamSpace {
+                model: Model::Single,
+                ndf: NdfKind::Ggx,
+                height: Height::Correlated,
+                anisotropic: false,
+                fresnel: FresnelFamily::Schlick,
+                diffuse: false,
+            },
+            optimizer: Optimizer::Auto,
+            loss: LossKind::L2,
+            gradient: Default::default(),
+            max_iters: 100,
+            seed: 0,
+            progress: false,
+            starts: 1,
+            projection: true,
+            pyramid: 1,
+        };
+        let row = fit_job(&records, Some(&truth), &options).unwrap();
+        let alpha = row.alpha.unwrap();
+        assert!(
+            (row.alpha_rel_error.unwrap() - (alpha - 0.3) / 0.3).abs() < 1e-12,
+            "{row:?}"
+        );
+        assert!(row.alpha_rel_error.unwrap().abs() < 0.05, "{row:?}");
+        assert!(row.loss.unwrap() >= 0.0 && row.evaluations.unwrap() > 0);
+    }
+}
