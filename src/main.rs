@@ -36,6 +36,8 @@ enum Command {
     Compare(commands::compare::CompareArgs),
     /// Sweep every model over extreme inputs and count NaN, Inf, negative values and energy gain.
     Stress(commands::stress::StressArgs),
+    /// Time and error of every model's estimator against heitz, and render and fit jobs.
+    Bench(commands::bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -49,6 +51,7 @@ fn main() -> ExitCode {
         Command::Fit(args) => commands::fit::run_fit(args),
         Command::Export(args) => commands::export::run_export(args),
         Command::Compare(args) => commands::compare::run_compare(args),
+        Command::Bench(args) => commands::bench::run_bench(args),
         // Findings (NaN, Inf, negative values) exit with 1; bad input with 2 as everywhere.
         Command::Stress(args) => match commands::stress::run_stress(args) {
             Ok(false) => return ExitCode::from(1),

@@ -1,6 +1,7 @@
 //! The command-line commands (DESIGN.md "Command-line contract"). `src/main.rs` only parses
 //! arguments and maps errors to exit codes; each command lives in its own file here.
 
+pub mod bench;
 pub mod brdf;
 pub mod compare;
 pub mod export;

@@ -1,0 +1,422 @@
+//! `bouncefit bench`: the measurements of [`crate::bench`] as tables (or, with `--json`,
+//! `{"estimators": [...], "jobs": [...], ...}`), and with `-o DIR` a folder holding
+//! `bench.json`, `bench.txt` (the tables) and `bench.png` (error against run time).
+//!
+//! | run | converged values | render job | fit jobs |
+//! | --- | --- | --- | --- |
+//! | full | 100000 samples | 9 photos at 256x256, repeated for 1 s | the 9-photo set at full resolution, every model |
+//! | `--quick` | 4096 samples | 9 photos at 128x128, once | the set halved 4 times (8x8), every model |
+//!
+//! The fit jobs use the options of `fit` (the same flags, e.g. `--pixel-samples`,
+//! `--max-iters`), and `--seed` seeds everything.
+
+use super::fit::FitOptionArgs;
+use super::output::StagedFolder;
+use crate::bench::cpu_time::process_seconds;
+use crate::bench::estimators::{self, EstimatorRow, EstimatorSettings, ALPHA_RANGE};
+use crate::bench::jobs::{self, JobRow, RenderTiming};
+use crate::bench::plot::error_against_time;
+use crate::bsdf::Model;
+use crate::capture::atomic_file::write_atomically;
+use crate::error::{Error, Result};
+use crate::material::Material;
+use crate::progress::Progress;
+use serde::Serialize;
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::time::Instant;
+
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    /// Models to measure (comma-separated); all by default. `heitz` is measured in the
+    /// estimator table whatever this says: it is the reference.
+    #[arg(long, value_delimiter = ',')]
+    pub models: Option<Vec<Model>>,
+    /// A reduced run (see the table of `bouncefit::commands::bench`) in under a minute.
+    #[arg(long)]
+    pub quick: bool,
+    /// Configurations of the estimator table.
+    #[arg(long, default_value_t = 256, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=65536))]
+    pub configs: usize,
+    /// Evaluations behind each converged value (default 100000; with --quick 4096).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(16..=100_000_000))]
+    pub reference_samples: Option<usize>,
+    /// Only the estimator table: no render or fit job.
+    #[arg(long)]
+    pub no_jobs: bool,
+    /// Capture template of the render job.
+    #[arg(long, default_value = "datasets/sources/copper-flash.capture.toml")]
+    pub render_capture: PathBuf,
+    /// Material of the render job (rendered under each model).
+    #[arg(long, default_value = "datasets/sources/copper-a03.material.json")]
+    pub render_material: PathBuf,
+    /// Side of the render job's square photos (default 256; with --quick 128).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096))]
+    pub render_resolution: Option<usize>,
+    /// Photo set of the fit jobs; its `material.json`, if any, gives the true roughness.
+    #[arg(long, default_value = "datasets/copper-flash")]
+    pub fit_set: PathBuf,
+    /// Halve the fit set's resolution this many times first (default 0; with --quick 4).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=8))]
+    pub fit_halvings: Option<usize>,
+    #[command(flatten)]
+    pub fit: FitOptionArgs,
+    /// Print `{"estimators": [...], "jobs": [...], "notes": [...], ...}` instead of tables.
+    #[arg(long)]
+    pub json: bool,
+    /// Folder to write bench.json, bench.txt and bench.png into.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Replace a non-empty output folder.
+    #[arg(long)]
+    pub force: bool,
+    /// No progress display.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// What the run measures, after `--quick` and the defaults are applied.
+#[derive(Clone, Debug, Serialize)]
+struct Settings {
+    quick: bool,
+    models: Vec<Model>,
+    estimators: EstimatorSettings,
+    render: Option<RenderSettings>,
+    fit: Option<FitSettings>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+struct RenderSettings {
+    capture: PathBuf,
+    material: PathBuf,
+    resolution: usize,
+    min_seconds: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+struct FitSettings {
+    set: PathBuf,
+    halvings: usize,
+    pixel_samples: usize,
+    max_iters: u64,
+}
+
+/// The `--json` document and `bench.json`.
+#[derive(Serialize)]
+struct BenchReport {
+    estimators: Vec<EstimatorRow>,
+    jobs: Vec<JobRow>,
+    settings: Settings,
+    notes: Vec<String>,
+    wall_seconds: f64,
+    /// CPU seconds of the process, all threads (the machine may be shared).
+    cpu_seconds: f64,
+}
+
+impl BenchArgs {
+    fn settings(&self) -> Settings {
+        let models = self.models.clone().unwrap_or_else(|| Model::ALL.to_vec());
+        let quick = self.quick;
+        Settings {
+            quick,
+            models,
+            estimators: EstimatorSettings {
+                configurations: self.configs,
+                reference_samples: self.reference_samples.unwrap_or(if quick {
+                    4096
+                } else {
+                    100_000
+                }),
+                timing_seconds: if quick { 0.05 } else { 0.5 },
+                seed: self.fit.seed,
+            },
+            render: (!self.no_jobs).then(|| RenderSettings {
+                capture: self.render_capture.clone(),
+                material: self.render_material.clone(),
+                resolution: self
+                    .render_resolution
+                    .unwrap_or(if quick { 128 } else { 256 }),
+                min_seconds: if quick { 0.0 } else { 1.0 },
+            }),
+            fit: (!self.no_jobs).then(|| FitSettings {
+                set: self.fit_set.clone(),
+                halvings: self.fit_halvings.unwrap_or(if quick { 4 } else { 0 }),
+                pixel_samples: self.fit.pixel_samples,
+                max_iters: self.fit.max_iters,
+            }),
+        }
+    }
+}
+
+/// A shared progress display (none with `--quiet`).
+fn progress(quiet: bool, label: &str, total: usize) -> Option<Mutex<Progress>> {
+    (!quiet).then(|| Mutex::new(Progress::new(label, total as u64)))
+}
+
+fn finish(progress: &Option<Mutex<Progress>>) {
+    if let Some(p) = progress {
+        p.lock().expect("no panics while holding the lock").finish();
+    }
+}
+
+pub fn run_bench(args: &BenchArgs) -> Result<()> {
+    let (started, cpu) = (Instant::now(), process_seconds());
+    let settings = args.settings();
+    // Everything that can fail on bad input fails before the long measurements.
+    let folder = match &args.output {
+        Some(dir) => Some(StagedFolder::new(dir, args.force)?),
+        None => None,
+    };
+    let render_inputs = match &settings.render {
+        Some(r) => Some((
+            jobs::render_records(&r.capture, [r.resolution; 2])?,
+            Material::load(&r.material)?,
+        )),
+        None => None,
+    };
+    let fit_inputs = match &settings.fit {
+        Some(f) => Some(jobs::fit_records(&f.set, f.pixel_samples, f.halvings)?),
+        None => None,
+    };
+
+    let units = estimators::work_units(&settings.models, &settings.estimators);
+    let bar = progress(args.quiet, "bench estimators", units);
+    let estimator_rows = estimators::measure(&settings.models, &settings.estimators, |done, m| {
+        if let Some(p) = &bar {
+            if let Ok(mut p) = p.try_lock() {
+                p.update(done as u64, || m.to_string());
+            }
+        }
+    });
+    finish(&bar);
+
+    let mut job_rows = Vec::new();
+    if let (Some(r), Some((records, material))) = (&settings.render, &render_inputs) {
+        let bar = progress(args.quiet, "bench render", settings.models.len());
+        for (i, &model) in settings.models.iter().enumerate() {
+            if let Some(p) = &bar {
+                p.lock()
+                    .expect("no panics")
+                    .update(i as u64, || model.to_string());
+            }
+            let timing = RenderTiming {
+                min_seconds: r.min_seconds,
+                max_repeats: 20,
+            };
+            job_rows.extend(jobs::render_jobs(
+                records,
+                material,
+                model,
+                timing,
+                settings.estimators.seed,
+            ));
+        }
+        finish(&bar);
+    }
+    if let Some((records, truth)) = &fit_inputs {
+        for &model in &settings.models {
+            if !args.quiet {
+                let [w, h] = [records.photos[0].width, records.photos[0].height];
+                eprintln!(
+                    "bench: fit {model} to {} photos of {w}x{h}",
+                    records.photos.len()
+                );
+            }
+            let options = args.fit.fit_options(model, !args.quiet);
+            job_rows.push(jobs::fit_job(records, truth.as_ref(), &options)?);
+        }
+    }
+
+    let report = BenchReport {
+        notes: notes(&settings, &estimator_rows, &job_rows),
+        estimators: estimator_rows,
+        jobs: job_rows,
+        settings,
+        wall_seconds: started.elapsed().as_secs_f64(),
+        cpu_seconds: process_seconds() - cpu,
+    };
+    let json = serde_json::to_string_pretty(&report)
+        .map_err(|e| Error::argument("json", e.to_string()))?;
+    let text = tables(&report);
+    if let Some(folder) = folder {
+        let write_text = |name: &str, content: &str| {
+            let path = folder.path(name);
+            write_atomically(&path, |w| {
+                w.write_all(content.as_bytes())
+                    .map_err(|e| Error::io(&path, e))
+            })
+        };
+        write_text("bench.json", &json)?;
+        write_text("bench.txt", &text)?;
+        error_against_time(&folder.path("bench.png"), &report.estimators)?;
+        folder.commit()?;
+    }
+    if args.json {
+        println!("{json}");
+    } else {
+        print!("{text}");
+    }
+    Ok(())
+}
+
+/// What the numbers mean and what this run left out.
+fn notes(settings: &Settings, estimators: &[EstimatorRow], jobs: &[JobRow]) -> Vec<String> {
+    let e = &settings.estimators;
+    let mut notes = vec![
+        format!(
+            "estimators: {} configurations (GGX, alpha {}..{}, wi and wo up to {} deg, copper and white Fresnel); converged values of stochastic models from {} samples{}",
+            e.configurations,
+            ALPHA_RANGE[0],
+            ALPHA_RANGE[1],
+            estimators::MAX_THETA_DEG,
+            e.reference_samples,
+            if settings.quick { " (--quick: the full run uses 100000)" } else { "" }
+        ),
+        "ns_per_eval: CPU time of one thread per eval call; ns_per_eval_wall: wall time of the same loop (larger when the machine is shared)".into(),
+        "rmse, rmse_vs_heitz, bias_vs_heitz: RMS over configurations and channels of relative errors; inverse_efficiency_vs_heitz (ineff) = (rmse^2 x ns_per_eval) / heitz's at the same n, below 1 is better; _rough (>=.5): alpha >= 0.5 only".into(),
+        "relative_variance (rel var): variance of one evaluation over the converged value squared, from the converged runs; inverse_efficiency_vs_heitz_from_reference (second table's ineff) is the efficiency ratio computed with it: the same quantity as ineff, steadier where rare large samples make the per-n values jump".into(),
+        "heitz is measured whatever --models says (the reference); its bias_vs_heitz compares two independent converged heitz values and should be about bias_vs_heitz_noise".into(),
+    ];
+    let analytic: Vec<&str> = Model::ALL
+        .iter()
+        .filter(|m| estimators.iter().any(|r| r.model == **m && !r.stochastic))
+        .map(|m| m.name())
+        .collect();
+    if !analytic.is_empty() {
+        notes.push(format!(
+            "{} are deterministic: rmse is 0 up to rounding, and inverse_efficiency_vs_heitz is null (variance 0: the efficiency is infinite); their error is bias_vs_heitz",
+            analytic.join(", ")
+        ));
+    }
+    if let Some(r) = &settings.render {
+        let skipped = jobs
+            .iter()
+            .find(|j| j.skip && j.job == jobs::JobKind::Render)
+            .map_or(0, |j| j.skipped_pixels);
+        notes.push(format!(
+            "render: {} rendered at {}x{}, 1 sample per pixel, median of repeats over at least {} s; skip=true renders only pixels that can enter a loss, which skips {skipped} pixels here",
+            r.capture.display(),
+            r.resolution,
+            r.resolution,
+            r.min_seconds
+        ));
+    }
+    if let Some(f) = &settings.fit {
+        notes.push(format!(
+            "fit: {} halved {} times, {} samples per pixel, at most {} iterations; fits always skip pixels of weight 0 (masked, saturated, non-finite, outside the sample: fit::Objective offers no switch), so only skip=true rows exist; alpha_rel_error is signed, against the set's material.json (the model that made the photos may differ from the fitted one)",
+            f.set.display(),
+            f.halvings,
+            f.pixel_samples,
+            f.max_iters
+        ));
+    }
+    notes
+}
+
+fn optional(v: Option<f64>, precision: usize) -> String {
+    v.map_or("-".into(), |v| format!("{v:.precision$e}"))
+}
+
+/// The estimator tables (by sample count, then by model), the job table, the notes and the
+/// run's time.
+fn tables(report: &BenchReport) -> String {
+    let mut out = format!(
+        "{:<12} {:>3} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
+        "model", "n", "ns/estim.", "rmse", "rmse>=.5", "vs heitz", "ineff", "ineff>=.5"
+    );
+    for r in &report.estimators {
+        out += &format!(
+            "{:<12} {:>3} {:>10.0} {:>9.2e} {:>9} {:>9.2e} {:>9} {:>9}\n",
+            r.model.name(),
+            r.samples,
+            r.samples as f64 * r.ns_per_eval,
+            r.rmse,
+            optional(r.rmse_rough, 2),
+            r.rmse_vs_heitz,
+            optional(r.inverse_efficiency_vs_heitz, 2),
+            optional(r.inverse_efficiency_vs_heitz_rough, 2),
+        );
+    }
+    out += &format!(
+        "\n{:<12} {:>8} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8}\n",
+        "model",
+        "ns/eval",
+        "wall ns",
+        "rel var",
+        "var>=.5",
+        "ineff",
+        "ineff>=.5",
+        "bias",
+        "mean",
+        "+-noise"
+    );
+    let mut per_model: Vec<&EstimatorRow> = report.estimators.iter().collect();
+    per_model.dedup_by_key(|r| r.model);
+    for r in &per_model {
+        out += &format!(
+            "{:<12} {:>8.0} {:>8.0} {:>9.2e} {:>9} {:>9} {:>9} {:>9.2e} {:>+9.2e} {:>8.1e}\n",
+            r.model.name(),
+            r.ns_per_eval,
+            r.ns_per_eval_wall,
+            r.relative_variance,
+            optional(r.relative_variance_rough, 2),
+            optional(r.inverse_efficiency_vs_heitz_from_reference, 2),
+            optional(r.inverse_efficiency_vs_heitz_from_reference_rough, 2),
+            r.bias_vs_heitz,
+            r.bias_vs_heitz_mean,
+            r.bias_vs_heitz_noise,
+        );
+    }
+    for r in &per_model {
+        out += &format!(
+            "{}: largest difference from heitz {:+.3} at {}\n",
+            r.model, r.worst_bias_vs_heitz, r.worst_bias_at
+        );
+    }
+    if !report.jobs.is_empty() {
+        out += &format!(
+            "\n{:<7} {:<12} {:>5} {:>9} {:>9} {:>4} {:>9} {:>8} {:>7} {:>10} {:>7} {:>9} {:>6}\n",
+            "job",
+            "model",
+            "skip",
+            "seconds",
+            "cpu s",
+            "runs",
+            "size",
+            "pixels",
+            "skipped",
+            "loss",
+            "alpha",
+            "alpha err",
+            "evals"
+        );
+        for j in &report.jobs {
+            out += &format!(
+                "{:<7} {:<12} {:>5} {:>9.4} {:>9.3} {:>4} {:>9} {:>8} {:>7} {:>10} {:>7} {:>9} {:>6}\n",
+                if j.job == jobs::JobKind::Render { "render" } else { "fit" },
+                j.model.name(),
+                j.skip,
+                j.seconds,
+                j.cpu_seconds,
+                j.repeats,
+                format!("{}x{}x{}", j.photos, j.resolution[0], j.resolution[1]),
+                j.pixels,
+                j.skipped_pixels,
+                optional(j.loss, 3),
+                j.alpha.map_or("-".into(), |a| format!("{a:.4}")),
+                j.alpha_rel_error.map_or("-".into(), |e| format!("{:+.2}%", 100.0 * e)),
+                j.evaluations.map_or("-".into(), |e| e.to_string()),
+            );
+        }
+    }
+    out += "\n";
+    for n in &report.notes {
+        out += &format!("note: {n}\n");
+    }
+    out += &format!(
+        "wall {:.1} s, CPU {:.1} s (all threads)\n",
+        report.wall_seconds, report.cpu_seconds
+    );
+    out
+}

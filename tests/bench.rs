@@ -1,0 +1,176 @@
+//! `bouncefit bench` through the command line: the `--json` contract of issue #5 item 3 on a
+//! small run, the output folder, and bad input.
+
+mod common;
+use common::*;
+use serde_json::Value;
+
+/// The rows of `model` in the estimator table, by sample count.
+fn rows<'a>(v: &'a Value, model: &str) -> Vec<&'a Value> {
+    v["estimators"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["model"] == model)
+        .collect()
+}
+
+#[test]
+fn quick_json_has_the_contract_fields_and_consistent_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bench");
+    let stdout = run_ok(&[
+        "bench",
+        "--quick",
+        "--json",
+        "--quiet",
+        "--models",
+        "single,bitterli",
+        "--configs",
+        "16",
+        "--render-resolution",
+        "32",
+        "--fit-halvings",
+        "5",
+        "--render-capture",
+        repo("datasets/sources/copper-flash.capture.toml")
+            .to_str()
+            .unwrap(),
+        "--render-material",
+        repo("datasets/sources/copper-a03.material.json")
+            .to_str()
+            .unwrap(),
+        "--fit-set",
+        repo("datasets/copper-flash").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let v: Value = serde_json::from_str(&stdout).unwrap();
+    // The folder holds the same document, the tables and the plot.
+    assert_eq!(read_json(&out.join("bench.json")), v);
+    assert!(std::fs::read_to_string(out.join("bench.txt"))
+        .unwrap()
+        .contains("bitterli"));
+    let png = std::fs::read(out.join("bench.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+
+    let estimators = v["estimators"].as_array().unwrap();
+    // heitz is added as the reference: 3 models x 6 sample counts.
+    assert_eq!(estimators.len(), 18);
+    for r in estimators {
+        for key in [
+            "model",
+            "samples",
+            "ns_per_eval",
+            "rmse",
+            "bias_vs_heitz",
+            "inverse_efficiency_vs_heitz",
+        ] {
+            assert!(r.get(key).is_some(), "missing {key} in {r}");
+        }
+        assert!(r["ns_per_eval"].as_f64().unwrap() > 0.0, "{r}");
+    }
+    let samples: Vec<u64> = rows(&v, "single")
+        .iter()
+        .map(|r| r["samples"].as_u64().unwrap())
+        .collect();
+    assert_eq!(samples, [1, 2, 4, 8, 16, 64]);
+
+    // Analytic: the mean of n evaluations is the value itself, up to the rounding of the sum.
+    for r in rows(&v, "single") {
+        assert!(r["rmse"].as_f64().unwrap() < 1e-12, "{r}");
+        assert!(r["inverse_efficiency_vs_heitz"].is_null(), "{r}");
+        // single lacks the multiple scattering heitz has: a real difference, far above noise.
+        assert!(
+            r["bias_vs_heitz"].as_f64().unwrap() > 5.0 * r["bias_vs_heitz_noise"].as_f64().unwrap()
+        );
+    }
+    // Stochastic: error at every n, falling with n (1/sqrt(64) = 1/8 in expectation).
+    for model in ["heitz", "bitterli"] {
+        let r = rows(&v, model);
+        let (first, last) = (
+            r[0]["rmse"].as_f64().unwrap(),
+            r[5]["rmse"].as_f64().unwrap(),
+        );
+        assert!(r.iter().all(|r| r["rmse"].as_f64().unwrap() > 0.0));
+        assert!(
+            last < first / 2.0,
+            "{model}: rmse {first} at n=1, {last} at n=64"
+        );
+        assert!(r[0]["inverse_efficiency_vs_heitz"].as_f64().unwrap() > 0.0);
+    }
+    // heitz against an independent converged heitz: a difference of the size the two runs'
+    // standard errors predict (the RMS of 48 such differences over its expectation exceeds 2
+    // with probability < 1e-6 for Gaussian errors), but not exactly zero.
+    let heitz = rows(&v, "heitz")[0];
+    let (bias, noise) = (
+        heitz["bias_vs_heitz"].as_f64().unwrap(),
+        heitz["bias_vs_heitz_noise"].as_f64().unwrap(),
+    );
+    assert!(
+        bias > 0.0 && bias < 2.0 * noise,
+        "bias {bias}, noise {noise}"
+    );
+    assert_eq!(heitz["inverse_efficiency_vs_heitz"].as_f64(), Some(1.0));
+
+    let jobs = v["jobs"].as_array().unwrap();
+    let count = |job: &str, skip: bool| {
+        jobs.iter()
+            .filter(|j| j["job"] == job && j["skip"] == skip)
+            .count()
+    };
+    assert_eq!(
+        (
+            count("render", false),
+            count("render", true),
+            count("fit", true)
+        ),
+        (2, 2, 2)
+    );
+    for j in jobs {
+        for key in ["job", "model", "skip", "seconds", "loss", "alpha_rel_error"] {
+            assert!(j.get(key).is_some(), "missing {key} in {j}");
+        }
+        assert!(j["seconds"].as_f64().unwrap() > 0.0, "{j}");
+        assert_eq!(j["photos"], 9);
+    }
+    for fit in jobs.iter().filter(|j| j["job"] == "fit") {
+        assert_eq!(fit["resolution"], serde_json::json!([4, 4]));
+        assert!(fit["loss"].as_f64().unwrap() >= 0.0);
+        // The bundled set was made by `single` at alpha 0.3; both models find it within 10%
+        // even on 4x4 photos.
+        let error = fit["alpha_rel_error"].as_f64().unwrap();
+        let alpha = fit["alpha"].as_f64().unwrap();
+        assert!(
+            (error - (alpha - 0.3) / 0.3).abs() < 1e-12 && error.abs() < 0.1,
+            "{fit}"
+        );
+    }
+}
+
+#[test]
+fn bad_input_exits_2_before_measuring_and_leaves_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("no-such-set");
+    let err = run_bad(&[
+        "bench",
+        "--quick",
+        "--quiet",
+        "--fit-set",
+        missing.to_str().unwrap(),
+        "-o",
+        dir.path().join("out").to_str().unwrap(),
+    ]);
+    assert!(err.contains("no-such-set"), "{err}");
+    assert!(!dir.path().join("out").exists());
+
+    let taken = dir.path().join("taken");
+    std::fs::create_dir(&taken).unwrap();
+    std::fs::write(taken.join("keep.txt"), "x").unwrap();
+    let err = run_bad(&["bench", "--quick", "--quiet", "-o", taken.to_str().unwrap()]);
+    assert!(err.contains("--force"), "{err}");
+    assert!(taken.join("keep.txt").exists());
+
+    let err = run_bad(&["bench", "--configs", "0"]);
+    assert!(err.contains("--configs"), "{err}");
+}
