@@ -3,11 +3,11 @@
 //!
 //! | job | what is timed | skip |
 //! | --- | --- | --- |
-//! | `render` | [`render_all`] of the records of a capture template (built once, 1 sample per pixel, no targets) with the template's material under each model; after one untimed render, the median of repeated renders until [`RenderTiming::min_seconds`] have passed | `false`: every pixel; `true`: only the pixels that enter a loss (weight > 0; outside the sample they are 0) |
-//! | `fit` | [`fit_model`] of each model to a photo set (records built once, optionally halved in resolution `halvings` times); the final loss and `alpha_rel_error = (alpha - alpha_true) / alpha_true` against the set's `material.json` | always `true`: [`crate::fit::objective::Objective`] renders only the pixels with weight > 0 (masked, saturated, non-finite and outside pixels are skipped), and no option turns that off |
+//! | `render` | [`render_all`] of the records of a capture template (built once, 1 sample per pixel, no targets) with the template's material under each model; after one untimed render, the median of repeated renders until [`RenderTiming::min_seconds`] have passed | `false`: every pixel, exactly; `true`: only the pixels that enter a loss (weight > 0), through the [`RenderPlan`] a fit would use; `rel_error_vs_exact` is the RMS difference from the exact render relative to its RMS |
+//! | `fit` | [`fit_model`] of each model to a photo set (records built once, optionally halved in resolution `halvings` times); the final loss and `alpha_rel_error = (alpha - alpha_true) / alpha_true` against the set's `material.json` | `false`: `--no-skip all`; `true`: every skip of [`crate::render::plan`] (pixels of weight 0 are never rendered by a fit) |
 //!
-//! `skipped_pixels` says how many pixels the skipping left out: on a rectified camera with no
-//! mask or saturated pixel (the bundled sets) it is 0, and the two render rows do the same work.
+//! `skipped_pixels` says how many pixels of weight 0 were left out; `plan` what the render
+//! plan skipped.
 
 use super::cpu_time::process_seconds;
 use crate::bsdf::Model;
@@ -15,7 +15,8 @@ use crate::capture::Capture;
 use crate::error::Result;
 use crate::fit::{fit_model, FitOptions};
 use crate::material::Material;
-use crate::render::{render_all, render_pixels};
+use crate::render::plan::{PlanSummary, RenderPlan, Skips};
+use crate::render::{render_all, render_material};
 use crate::shading::ShadingRecords;
 use serde::Serialize;
 use std::path::Path;
@@ -53,6 +54,11 @@ pub struct JobRow {
     pub photos: usize,
     pub pixels: usize,
     pub skipped_pixels: usize,
+    /// What the render plan skipped (rows with `skip`).
+    pub plan: Option<PlanSummary>,
+    /// Renders with `skip`: RMS difference from the exact render of the same pixels, relative
+    /// to its RMS (for stochastic models this includes their noise: the streams differ).
+    pub rel_error_vs_exact: Option<f64>,
 }
 
 impl JobRow {
@@ -81,6 +87,8 @@ impl JobRow {
             photos: records.photos.len(),
             pixels,
             skipped_pixels: records.pixel_count() - pixels,
+            plan: None,
+            rel_error_vs_exact: None,
         }
     }
 }
@@ -144,8 +152,14 @@ pub fn render_jobs(
     let used: Vec<usize> = (0..records.pixel_count())
         .filter(|&p| records.weight[p] > 0.0)
         .collect();
+    let plan = RenderPlan::for_material(Skips::all(), &material, records, &used);
+    let planned = || render_material(&material, records, &used, &plan, seed);
     // One untimed render wakes the thread pool and touches the records.
-    std::hint::black_box(render_all(&material, records, seed));
+    let exact = render_all(&material, records, seed);
+    let error = relative_rms_difference(
+        &planned(),
+        &used.iter().map(|&p| exact[p]).collect::<Vec<_>>(),
+    );
     [false, true].map(|skip| {
         let mut row = JobRow::new(
             JobKind::Render,
@@ -166,7 +180,7 @@ pub fn render_jobs(
         {
             let one = Instant::now();
             let image = if skip {
-                render_pixels(&material, records, &used, seed)
+                planned()
             } else {
                 render_all(&material, records, seed)
             };
@@ -177,8 +191,24 @@ pub fn render_jobs(
         row.repeats = seconds.len();
         row.seconds = seconds[seconds.len() / 2];
         row.cpu_seconds = (process_seconds() - cpu) / seconds.len() as f64;
+        if skip {
+            row.plan = Some(plan.summary());
+            row.rel_error_vs_exact = Some(error);
+        }
         row
     })
+}
+
+/// `sqrt(sum |a - b|^2 / sum |b|^2)` over pixels and channels.
+pub fn relative_rms_difference(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    let (mut diff, mut norm) = (0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        for c in 0..3 {
+            diff += (x[c] - y[c]).powi(2);
+            norm += y[c] * y[c];
+        }
+    }
+    (diff / norm.max(f64::MIN_POSITIVE)).sqrt()
 }
 
 /// Fit the model of `options` to `records` and time it.
@@ -188,7 +218,8 @@ pub fn fit_job(
     options: &FitOptions,
 ) -> Result<JobRow> {
     let used = records.weight.iter().filter(|&&w| w > 0.0).count();
-    let mut row = JobRow::new(JobKind::Fit, options.space.model, true, records, used);
+    let skip = options.skips.any();
+    let mut row = JobRow::new(JobKind::Fit, options.space.model, skip, records, used);
     let cpu = process_seconds();
     let fit = fit_model(records, options)?;
     row.cpu_seconds = process_seconds() - cpu;
@@ -196,6 +227,7 @@ pub fn fit_job(
     row.repeats = 1;
     row.loss = Some(fit.loss);
     row.evaluations = Some(fit.evaluations);
+    row.plan = skip.then_some(fit.render_plan);
     let alpha = fit.material.alpha[0];
     row.alpha = Some(alpha);
     row.alpha_rel_error = truth.map(|t| (alpha - t.alpha[0]) / t.alpha[0]);
@@ -269,6 +301,7 @@ mod tests {
             starts: 1,
             projection: true,
             pyramid: 1,
+            skips: Default::default(),
         };
         let row = fit_job(&records, Some(&truth), &options).unwrap();
         let alpha = row.alpha.unwrap();

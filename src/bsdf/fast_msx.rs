@@ -79,9 +79,8 @@ impl<T: Real> FastMsx<T> {
 }
 
 impl<T: Real> ScalarBrdf<T> for FastMsx<T> {
-    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
-        let (single, indirect) = self.eval_split(wi, wo);
-        single + indirect
+    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
+        Self::eval_split(self, wi, wo)
     }
 }
 

@@ -77,8 +77,8 @@ impl<T: Real> KullaConty<T> {
 }
 
 impl<T: Real> ScalarBrdf<T> for KullaConty<T> {
-    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
-        self.single.eval(wi, wo) + self.compensation(wi, wo)
+    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
+        (self.single.eval(wi, wo), self.compensation(wi, wo))
     }
 }
 

@@ -110,13 +110,28 @@ pub trait Brdf: Send + Sync {
 /// The total value `f(wi, wo)` of a model at scalar type `T`: what the renderer needs. `f64`
 /// through any [`Brdf`] object; dual numbers (exact and pathwise derivatives for the fitter)
 /// through the models that are generic over the scalar ([`differentiable`]).
-pub trait ScalarBrdf<T>: Send + Sync {
-    /// `f(wi, wo)` in 1/sr, the single and multiple-bounce parts together; stochastic models
-    /// draw from `rng` exactly as [`Brdf::eval`] does, so every scalar type sees the same paths.
-    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T>;
+pub trait ScalarBrdf<T: Real>: Send + Sync {
+    /// `f(wi, wo)` in 1/sr as `(single, multi)`: the single-bounce part and everything the
+    /// model adds to it; stochastic models draw from `rng` exactly as [`Brdf::eval`] does, so
+    /// every scalar type sees the same paths. `crate::render::plan` evaluates the two parts at
+    /// different places, so the split must be the model's own, not a difference of totals.
+    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>);
+
+    /// `f(wi, wo)` in 1/sr, the single and multiple-bounce parts together.
+    #[inline]
+    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
+        let (single, multi) = self.eval_split(wi, wo, rng);
+        single + multi
+    }
 }
 
 impl ScalarBrdf<f64> for dyn Brdf {
+    #[inline]
+    fn eval_split(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> (Rgb<f64>, Rgb<f64>) {
+        let value = self.eval(wi, wo, rng);
+        (Rgb(value.single), Rgb(value.multi))
+    }
+
     #[inline]
     fn eval_total(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> Rgb<f64> {
         Rgb(self.eval(wi, wo, rng).total())

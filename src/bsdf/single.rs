@@ -69,6 +69,11 @@ impl<T: Real> SingleBounce<T> {
 
 impl<T: Real> ScalarBrdf<T> for SingleBounce<T> {
     #[inline]
+    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
+        (self.eval(wi, wo), Rgb::splat(T::zero()))
+    }
+
+    #[inline]
     fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
         self.eval(wi, wo)
     }

@@ -51,9 +51,8 @@ impl<T: Real> Turquin<T> {
 }
 
 impl<T: Real> ScalarBrdf<T> for Turquin<T> {
-    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
-        let (single, added) = self.eval_split(wi, wo);
-        single + added
+    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
+        Self::eval_split(self, wi, wo)
     }
 }
 

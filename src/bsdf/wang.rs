@@ -536,9 +536,8 @@ impl<T: Real> Wang<T> {
 }
 
 impl<T: Real> ScalarBrdf<T> for Wang<T> {
-    fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
-        let (single, multi) = self.eval_split(wi, wo, rng);
-        single + multi
+    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
+        Self::eval_split(self, wi, wo, rng)
     }
 }
 

@@ -19,8 +19,10 @@ use crate::bench::plot::error_against_time;
 use crate::bsdf::Model;
 use crate::capture::atomic_file::write_atomically;
 use crate::error::{Error, Result};
+use crate::fit::FitOptions;
 use crate::material::Material;
 use crate::progress::Progress;
+use crate::render::plan::Skips;
 use serde::Serialize;
 use std::io::Write;
 use std::path::PathBuf;
@@ -223,8 +225,13 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
                     records.photos.len()
                 );
             }
-            let options = args.fit.fit_options(model, !args.quiet);
-            job_rows.push(jobs::fit_job(records, truth.as_ref(), &options)?);
+            for skips in [Skips::none(), Skips::all()] {
+                let options = FitOptions {
+                    skips,
+                    ..args.fit.fit_options(model, !args.quiet)
+                };
+                job_rows.push(jobs::fit_job(records, truth.as_ref(), &options)?);
+            }
         }
     }
 
@@ -295,7 +302,7 @@ fn notes(settings: &Settings, estimators: &[EstimatorRow], jobs: &[JobRow]) -> V
             .find(|j| j.skip && j.job == jobs::JobKind::Render)
             .map_or(0, |j| j.skipped_pixels);
         notes.push(format!(
-            "render: {} rendered at {}x{}, 1 sample per pixel, median of repeats over at least {} s; skip=true renders only pixels that can enter a loss, which skips {skipped} pixels here",
+            "render: {} rendered at {}x{}, 1 sample per pixel, median of repeats over at least {} s; skip=true renders only pixels that can enter a loss ({skipped} pixels skipped here) through the render plan a fit uses (stride: anchor stride of the multiple-bounce term; err: RMS difference from the exact render, relative)",
             r.capture.display(),
             r.resolution,
             r.resolution,
@@ -304,7 +311,7 @@ fn notes(settings: &Settings, estimators: &[EstimatorRow], jobs: &[JobRow]) -> V
     }
     if let Some(f) = &settings.fit {
         notes.push(format!(
-            "fit: {} halved {} times, {} samples per pixel, at most {} iterations; fits always skip pixels of weight 0 (masked, saturated, non-finite, outside the sample: fit::Objective offers no switch), so only skip=true rows exist; alpha_rel_error is signed, against the set's material.json (the model that made the photos may differ from the fitted one)",
+            "fit: {} halved {} times, {} samples per pixel, at most {} iterations; skip=false is --no-skip all (pixels of weight 0 are never rendered), skip=true every skip of render::plan; alpha_rel_error is signed, against the set's material.json (the model that made the photos may differ from the fitted one)",
             f.set.display(),
             f.halvings,
             f.pixel_samples,
@@ -376,7 +383,7 @@ fn tables(report: &BenchReport) -> String {
     }
     if !report.jobs.is_empty() {
         out += &format!(
-            "\n{:<7} {:<12} {:>5} {:>9} {:>9} {:>4} {:>9} {:>8} {:>7} {:>10} {:>7} {:>9} {:>6}\n",
+            "\n{:<7} {:<12} {:>5} {:>9} {:>9} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6}\n",
             "job",
             "model",
             "skip",
@@ -386,6 +393,8 @@ fn tables(report: &BenchReport) -> String {
             "size",
             "pixels",
             "skipped",
+            "stride",
+            "err",
             "loss",
             "alpha",
             "alpha err",
@@ -393,7 +402,7 @@ fn tables(report: &BenchReport) -> String {
         );
         for j in &report.jobs {
             out += &format!(
-                "{:<7} {:<12} {:>5} {:>9.4} {:>9.3} {:>4} {:>9} {:>8} {:>7} {:>10} {:>7} {:>9} {:>6}\n",
+                "{:<7} {:<12} {:>5} {:>9.4} {:>9.3} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6}\n",
                 if j.job == jobs::JobKind::Render { "render" } else { "fit" },
                 j.model.name(),
                 j.skip,
@@ -403,6 +412,8 @@ fn tables(report: &BenchReport) -> String {
                 format!("{}x{}x{}", j.photos, j.resolution[0], j.resolution[1]),
                 j.pixels,
                 j.skipped_pixels,
+                j.plan.as_ref().map_or("-".into(), |p| p.multi_stride.to_string()),
+                optional(j.rel_error_vs_exact, 1),
                 optional(j.loss, 3),
                 j.alpha.map_or("-".into(), |a| format!("{a:.4}")),
                 j.alpha_rel_error.map_or("-".into(), |e| format!("{:+.2}%", 100.0 * e)),

@@ -16,6 +16,7 @@ use crate::fit::selection::{GaussianFit, Selection};
 use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
 use crate::microfacet::{Height, NdfKind};
+use crate::render::plan::{Skip, Skips};
 use crate::render::render_all;
 use crate::shading::{ExclusionCounts, ShadingRecords};
 use serde::Serialize;
@@ -88,6 +89,10 @@ pub struct FitOptionArgs {
     pub max_iters: u64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Work skips to switch off, for comparison (comma-separated: repeated, sparse-multi,
+    /// faint-multi, all); see `bouncefit::render::plan`.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub no_skip: Vec<Skip>,
 }
 
 /// `--mcmc` and its options (see `bouncefit::fit::mcmc`).
@@ -149,6 +154,7 @@ impl FitOptionArgs {
             starts: self.starts,
             projection: !self.no_projection,
             pyramid: self.pyramid,
+            skips: Skips::except(&self.no_skip),
         }
     }
 

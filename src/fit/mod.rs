@@ -33,6 +33,7 @@ use crate::loss::LossKind;
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::fresnel::reflectivity_edge_tint_from_ior;
 use crate::progress::Progress;
+use crate::render::plan::{PlanSummary, Skips};
 use crate::shading::ShadingRecords;
 use argmin::core::Error as ArgminError;
 pub use local::TracePoint;
@@ -91,6 +92,8 @@ pub struct FitOptions {
     pub projection: bool,
     /// Pyramid levels: 1 fits at full resolution only; n fits at 1/2^(n-1) first.
     pub pyramid: usize,
+    /// Work the renders may skip (`--no-skip` switches skips off; see `render::plan`).
+    pub skips: Skips,
 }
 
 /// The loss of one photo at the fitted parameters.
@@ -148,6 +151,9 @@ pub struct ModelFit {
     pub levels: Vec<LevelResult>,
     pub photos: Vec<PhotoLoss>,
     pub trace: Vec<TracePoint>,
+    /// What the renders of the final level skipped (`render::plan`).
+    #[serde(default)]
+    pub render_plan: PlanSummary,
 }
 
 /// Coarse levels stop before a photo's shorter side falls below this many pixels.
@@ -209,12 +215,14 @@ fn fit_level(
     progress: bool,
 ) -> Result<ModelFit> {
     let space = options.space;
-    let objective =
-        Objective::new(space, records, options.loss, options.seed).with_gradient(options.gradient);
+    let objective = Objective::new(space, records, options.loss, options.seed)
+        .with_gradient(options.gradient)
+        .with_skips(options.skips);
     // Stochastic models: the global start is searched on one render, the local searches use
     // the unbiased pair loss (see `Objective::single_render` and `crate::loss`).
     let screening = Objective::new(space, records, options.loss, options.seed)
         .with_gradient(options.gradient)
+        .with_skips(options.skips)
         .single_render();
     if objective.pixel_count() == 0 {
         return Err(Error::argument(
@@ -269,7 +277,8 @@ fn fit_level(
     if objective.is_paired() && results.len() > 1 {
         // Each search minimised the pair loss on the same streams and so also chased their
         // noise; rank the results on fresh streams, which that noise does not follow.
-        let judge = Objective::new(space, records, options.loss, options.seed.wrapping_add(1));
+        let judge = Objective::new(space, records, options.loss, options.seed.wrapping_add(1))
+            .with_skips(options.skips);
         for result in &mut results {
             result.0 = judge.loss(&result.1) / judge.loss_from_cost(1.0);
         }
@@ -323,6 +332,7 @@ fn fit_level(
         levels: Vec::new(),
         photos,
         trace,
+        render_plan: objective.plan_summary(),
     })
 }
 

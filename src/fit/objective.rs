@@ -18,13 +18,14 @@
 use super::params::ParamSpace;
 use crate::bsdf::differentiable;
 use crate::loss::{ImageLayout, Loss, LossKind};
-use crate::render::{render_model, render_pixels};
+use crate::render::plan::{PlanSummary, RenderPlan, Skips};
+use crate::render::{render_material, render_planned};
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
 use num_dual::DualSVec64;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Relative step of the central differences (in unbounded coordinates): truncation error
 /// ~h^2 = 1e-10, rounding error ~eps/h = 1e-11 relative to the cost.
@@ -71,6 +72,10 @@ pub struct Objective<'a> {
     /// (independent streams) for stochastic ones.
     seeds: Vec<u64>,
     gradient: GradientMethod,
+    /// Which work skips the renders may use, and the plan built from them on first use.
+    skips: Skips,
+    plan: OnceLock<RenderPlan>,
+    stochastic: bool,
     /// The loss is divided by this, so optimiser tolerances are relative (L2: mean target^2).
     scale: f64,
     pub evaluations: Arc<AtomicUsize>,
@@ -114,6 +119,9 @@ impl<'a> Objective<'a> {
             kind,
             seeds,
             gradient: GradientMethod::Exact,
+            skips: Skips::default(),
+            plan: OnceLock::new(),
+            stochastic,
             scale,
             evaluations: Arc::new(AtomicUsize::new(0)),
             best: Mutex::new((f64::INFINITY, Vec::new())),
@@ -143,6 +151,32 @@ impl<'a> Objective<'a> {
     pub fn with_gradient(mut self, method: GradientMethod) -> Self {
         self.gradient = method;
         self
+    }
+
+    /// The same objective rendering with only the work skips in `skips` (default: all).
+    pub fn with_skips(mut self, skips: Skips) -> Self {
+        self.skips = skips;
+        self.plan = OnceLock::new();
+        self
+    }
+
+    /// The render plan of this objective's model and pixels, built on first use.
+    pub fn plan(&self) -> &RenderPlan {
+        self.plan.get_or_init(|| {
+            let space = &self.space;
+            let model = (space.model, space.ndf, space.height, self.stochastic);
+            RenderPlan::new(self.skips, model, self.records, &self.pixels)
+        })
+    }
+
+    /// What the render plan skips.
+    pub fn plan_summary(&self) -> PlanSummary {
+        self.plan().summary()
+    }
+
+    /// Predicted radiance of the loss pixels for `material`, rendered through the plan.
+    fn render(&self, material: &crate::material::Material, seed: u64) -> Vec<[f64; 3]> {
+        render_material(material, self.records, &self.pixels, self.plan(), seed)
     }
 
     /// The method [`Gradient::gradient`] uses: `Exact` only when requested and the model and
@@ -186,12 +220,7 @@ impl<'a> Objective<'a> {
 
     /// Predicted radiance of the loss pixels at coordinates `x` (the first render).
     pub fn predict(&self, x: &[f64]) -> Vec<[f64; 3]> {
-        render_pixels(
-            &self.space.material(x),
-            self.records,
-            &self.pixels,
-            self.seeds[0],
-        )
+        self.render(&self.space.material(x), self.seeds[0])
     }
 
     /// The renders the loss compares at `x`: one, or two on independent streams for a
@@ -200,7 +229,7 @@ impl<'a> Objective<'a> {
         let material = self.space.material(x);
         self.seeds
             .iter()
-            .map(|&seed| render_pixels(&material, self.records, &self.pixels, seed))
+            .map(|&seed| self.render(&material, seed))
             .collect()
     }
 
@@ -285,11 +314,13 @@ impl<'a> Objective<'a> {
             .seeds
             .iter()
             .map(|&seed| {
-                render_model(
+                render_planned(
                     brdf.as_ref(),
+                    &surface.single,
                     surface.diffuse,
                     self.records,
                     &self.pixels,
+                    self.plan(),
                     seed,
                 )
             })

@@ -1,0 +1,291 @@
+//! Sparse evaluation of the multiple-bounce term: it is evaluated at anchor pixels on a
+//! regular grid of every photo and interpolated bilinearly in between, while the single-bounce
+//! term stays exact at every sub-sample (issue #5, "smooth terms evaluated sparsely").
+//!
+//! Why it is accurate: the multiple-bounce lobe is a low-frequency function of `(wi, wo)`
+//! (Heitz et al. 2016, Fig. 9; Kulla & Conty 2017, the compensation lobe depends on the two
+//! elevations only), and `(wi, wo)` moves smoothly across a photo of a flat sample. The
+//! interpolation therefore adds an error of order `stride^2` times the lobe's second derivative
+//! along the image, far below the single-bounce peak's own scale.
+//!
+//! | quantity | value |
+//! | --- | --- |
+//! | anchors of a `W`-pixel row | columns `0, s, 2s, ...` and `W - 1` (so every pixel lies between two) |
+//! | an anchor's geometry | its sub-sample nearest the pixel centre among those that see the sample |
+//! | a pixel's multiple-bounce value | bilinear in its 4 surrounding anchors; exact (no interpolation) when one of them sees no sample |
+//! | stride `s` | the largest of [`CANDIDATE_STRIDES`] whose interpolation error, measured on these records with two proxy lobes over [`PROXY_ALPHAS`], stays below the tolerance (RMS over the loss pixels, relative to the RMS radiance) |
+//!
+//! The proxies are the analytic multiple-bounce lobes of Kulla & Conty 2017 (smooth in the
+//! elevations) and Rosales et al. 2023 (Fast-MSX, a second-bounce lobe with azimuthal
+//! structure), evaluated with white Fresnel; the stride is fixed for the whole fit, so the
+//! objective stays a smooth function of the parameters.
+
+use super::TASK_PIXELS;
+use crate::bsdf::single::SingleBounce;
+use crate::bsdf::{differentiable, Model};
+use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
+use crate::scalar::{Rgb, Vec3};
+use crate::shading::ShadingRecords;
+use rayon::prelude::*;
+
+/// Strides tried, largest last.
+pub const CANDIDATE_STRIDES: [usize; 7] = [2, 3, 4, 6, 8, 12, 16];
+
+/// Roughness values at which the interpolation error is measured (the multiple-bounce lobe is
+/// negligible below 0.05 and the widest, so the easiest to interpolate, at the top).
+pub const PROXY_ALPHAS: [f64; 7] = [0.05, 0.1, 0.2, 0.35, 0.6, 1.0, 1.5];
+
+/// One anchor: the pixel whose random stream it uses and the geometry it is evaluated at.
+#[derive(Clone, Copy, Debug)]
+pub struct Anchor {
+    pub pixel: usize,
+    pub wi: [f64; 3],
+    pub wo: [f64; 3],
+}
+
+/// Bilinear weights of a pixel on its 4 anchors (indices into [`Anchors::points`]).
+pub type Corners = [(u32, f64); 4];
+
+/// The anchor grid of a pixel list at one stride.
+#[derive(Clone, Debug)]
+pub struct Anchors {
+    pub stride: usize,
+    pub points: Vec<Anchor>,
+    /// Per pixel of the list: its anchors and weights, or `None` when some surrounding anchor
+    /// sees no sample (the pixel is then evaluated exactly).
+    pub corners: Vec<Option<Corners>>,
+}
+
+/// The columns (or rows) of the anchors of an axis of `n` pixels at `stride`.
+fn axis_nodes(n: usize, stride: usize) -> Vec<usize> {
+    let mut nodes: Vec<usize> = (0..n).step_by(stride).collect();
+    if nodes.last() != Some(&(n - 1)) {
+        nodes.push(n - 1);
+    }
+    nodes
+}
+
+/// The two nodes around `x` and the weight of the second.
+fn bracket(nodes: &[usize], stride: usize, x: usize) -> (usize, usize, f64) {
+    let i = (x / stride).min(nodes.len().saturating_sub(2));
+    let (lo, hi) = (nodes[i], nodes[(i + 1).min(nodes.len() - 1)]);
+    let t = if hi > lo {
+        (x - lo) as f64 / (hi - lo) as f64
+    } else {
+        0.0
+    };
+    (i, (i + 1).min(nodes.len() - 1), t)
+}
+
+impl Anchors {
+    /// The anchors that the pixels `pixels` of `records` need at `stride`.
+    pub fn new(records: &ShadingRecords, pixels: &[usize], stride: usize) -> Anchors {
+        let mut points = Vec::new();
+        // Per photo: anchor index of each grid node, assigned on first use (u32::MAX: not yet,
+        // u32::MAX - 1: the node sees no sample).
+        const UNSET: u32 = u32::MAX;
+        const BLIND: u32 = u32::MAX - 1;
+        let grids: Vec<(Vec<usize>, Vec<usize>)> = records
+            .photos
+            .iter()
+            .map(|span| {
+                (
+                    axis_nodes(span.width, stride),
+                    axis_nodes(span.height, stride),
+                )
+            })
+            .collect();
+        let mut slots: Vec<Vec<u32>> = grids
+            .iter()
+            .map(|(xs, ys)| vec![UNSET; xs.len() * ys.len()])
+            .collect();
+        let mut photo = 0;
+        let corners = pixels
+            .iter()
+            .map(|&p| {
+                while p >= records.photos[photo].pixels().end {
+                    photo += 1;
+                }
+                let span = &records.photos[photo];
+                let (xs, ys) = &grids[photo];
+                let local = p - span.first_pixel;
+                let (c, r) = (local % span.width, local / span.width);
+                let (x0, x1, tx) = bracket(xs, stride, c);
+                let (y0, y1, ty) = bracket(ys, stride, r);
+                let mut corner = |ix: usize, iy: usize| {
+                    let slot = &mut slots[photo][iy * xs.len() + ix];
+                    if *slot == UNSET {
+                        let pixel = span.first_pixel + ys[iy] * span.width + xs[ix];
+                        *slot = match reference_geometry(records, pixel) {
+                            Some((wi, wo)) => {
+                                points.push(Anchor { pixel, wi, wo });
+                                (points.len() - 1) as u32
+                            }
+                            None => BLIND,
+                        };
+                    }
+                    *slot
+                };
+                let nodes = [
+                    (corner(x0, y0), (1.0 - tx) * (1.0 - ty)),
+                    (corner(x1, y0), tx * (1.0 - ty)),
+                    (corner(x0, y1), (1.0 - tx) * ty),
+                    (corner(x1, y1), tx * ty),
+                ];
+                nodes
+                    .iter()
+                    .all(|&(slot, _)| slot != BLIND)
+                    .then_some(nodes)
+            })
+            .collect();
+        Anchors {
+            stride,
+            points,
+            corners,
+        }
+    }
+
+    /// Pixels of the list evaluated exactly because an anchor around them sees no sample.
+    pub fn exact_pixels(&self) -> usize {
+        self.corners.iter().filter(|c| c.is_none()).count()
+    }
+
+    /// The bilinear interpolation of per-anchor `values` at pixel `k` of the list.
+    #[inline]
+    pub fn interpolate<T: crate::scalar::Real>(corners: &Corners, values: &[Rgb<T>]) -> Rgb<T> {
+        let mut sum = Rgb::splat(T::zero());
+        for &(anchor, weight) in corners {
+            if weight != 0.0 {
+                sum = sum + values[anchor as usize].scale(T::c(weight));
+            }
+        }
+        sum
+    }
+
+    /// The stride for `pixels` of `records` (see the module table), or `None` when no
+    /// candidate stride meets `tolerance`.
+    pub fn choose(
+        records: &ShadingRecords,
+        pixels: &[usize],
+        ndf: NdfKind,
+        height: Height,
+        tolerance: f64,
+    ) -> Option<Anchors> {
+        let errors = interpolation_errors(records, pixels, ndf, height);
+        CANDIDATE_STRIDES
+            .iter()
+            .zip(&errors)
+            .filter(|(_, &error)| error <= tolerance)
+            .map(|(&stride, _)| stride)
+            .next_back()
+            .map(|stride| Anchors::new(records, pixels, stride))
+    }
+}
+
+/// The geometry a pixel's multiple-bounce term is evaluated at: its sub-sample nearest the
+/// pixel centre among those that see the sample (nonzero irradiance), `None` if none does.
+pub fn reference_geometry(records: &ShadingRecords, pixel: usize) -> Option<([f64; 3], [f64; 3])> {
+    let spp = records.samples_per_pixel;
+    let k = (spp as f64).sqrt().round() as usize;
+    let centre = (k as f64 - 1.0) / 2.0;
+    (0..spp)
+        .map(|j| pixel * spp + j)
+        .filter(|&s| records.irradiance[s] != [0.0; 3])
+        .min_by(|&a, &b| {
+            let distance = |s: usize| {
+                let j = s % spp;
+                ((j % k) as f64 - centre).powi(2) + ((j / k) as f64 - centre).powi(2)
+            };
+            distance(a).total_cmp(&distance(b))
+        })
+        .map(|s| (records.wi[s], records.wo[s]))
+}
+
+/// Per candidate stride: the largest, over the proxy lobes and [`PROXY_ALPHAS`], RMS error of
+/// interpolating the lobe's radiance over the loss pixels, relative to the RMS radiance of
+/// single plus lobe (loss weights; channel 0, white Fresnel).
+pub fn interpolation_errors(
+    records: &ShadingRecords,
+    pixels: &[usize],
+    ndf: NdfKind,
+    height: Height,
+) -> Vec<f64> {
+    let spp = records.samples_per_pixel as f64;
+    // Mean irradiance of each pixel: turns a BRDF value at the reference geometry into radiance.
+    let irradiance: Vec<f64> = pixels
+        .iter()
+        .map(|&p| {
+            let s = p * records.samples_per_pixel..(p + 1) * records.samples_per_pixel;
+            records.irradiance[s].iter().map(|e| e[0]).sum::<f64>() / spp
+        })
+        .collect();
+    let weight: Vec<f64> = pixels.iter().map(|&p| records.weight[p]).collect();
+    let grids: Vec<Anchors> = CANDIDATE_STRIDES
+        .iter()
+        .map(|&s| Anchors::new(records, pixels, s))
+        .collect();
+    let mut worst = vec![0.0f64; CANDIDATE_STRIDES.len()];
+    for proxy in [Model::KullaConty, Model::FastMsx] {
+        for alpha in PROXY_ALPHAS {
+            let single = SingleBounce {
+                microfacet: Microfacet::new(ndf, alpha, alpha),
+                fresnel: Fresnel::White,
+                height,
+            };
+            let lobe =
+                differentiable::<f64>(proxy, single).expect("the proxies are analytic models");
+            let split = |wi: [f64; 3], wo: [f64; 3]| {
+                let mut unused = crate::albedo::rng_stream(0, 0);
+                let (s, m) = lobe.eval_split(Vec3::from_f64(wi), Vec3::from_f64(wo), &mut unused);
+                (s.0[0], m.0[0])
+            };
+            let exact: Vec<Option<(f64, f64)>> = pixels
+                .par_iter()
+                .with_min_len(TASK_PIXELS)
+                .map(|&p| reference_geometry(records, p).map(|(wi, wo)| split(wi, wo)))
+                .collect();
+            let mut norm = 0.0;
+            for (k, value) in exact.iter().enumerate() {
+                if let Some((s, m)) = value {
+                    norm += weight[k] * ((s + m) * irradiance[k]).powi(2);
+                }
+            }
+            if norm <= 0.0 {
+                continue;
+            }
+            for (error, anchors) in worst.iter_mut().zip(&grids) {
+                let values: Vec<Rgb<f64>> = anchors
+                    .points
+                    .par_iter()
+                    .map(|a| Rgb::splat(split(a.wi, a.wo).1))
+                    .collect();
+                let mut sum = 0.0;
+                for (k, corners) in anchors.corners.iter().enumerate() {
+                    if let (Some(corners), Some((_, m))) = (corners, exact[k]) {
+                        let interpolated = Anchors::interpolate(corners, &values).0[0];
+                        sum += weight[k] * ((interpolated - m) * irradiance[k]).powi(2);
+                    }
+                }
+                *error = error.max((sum / norm).sqrt());
+            }
+        }
+    }
+    worst
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axis_nodes_cover_both_ends() {
+        assert_eq!(axis_nodes(10, 4), vec![0, 4, 8, 9]);
+        assert_eq!(axis_nodes(9, 4), vec![0, 4, 8]);
+        assert_eq!(axis_nodes(1, 4), vec![0]);
+        let nodes = axis_nodes(10, 4);
+        assert_eq!(bracket(&nodes, 4, 0), (0, 1, 0.0));
+        assert_eq!(bracket(&nodes, 4, 6), (1, 2, 0.5));
+        assert_eq!(bracket(&nodes, 4, 9), (2, 3, 1.0));
+        assert_eq!(bracket(&[0], 4, 0), (0, 0, 0.0));
+    }
+}

@@ -1,0 +1,232 @@
+//! Evaluate a material over shading records: the predicted linear radiance of each pixel.
+//!
+//! A pixel's value is the mean over its stratified sub-pixel samples of
+//! `(f_model(wi, wo) + diffuse / pi) * irradiance` (PHYSICS.md "Radiance of a pixel"), i.e. the
+//! pixel-footprint average that cameras and renderers such as Mitsuba 3 produce. Pixels are
+//! processed in parallel with rayon; a stochastic model draws from the random stream of its
+//! pixel index, so the result does not depend on the thread count. One pixel loop serves every
+//! scalar type: `f64` for the cost, dual numbers for exact gradients (`fit::objective`).
+//!
+//! [`render_planned`] renders through a [`plan::RenderPlan`], which skips the work a scene does
+//! not need (issue #5): fits render the same pixels hundreds of times, so the plan is built
+//! once per objective.
+
+pub mod anchors;
+pub mod plan;
+pub mod repeated;
+
+use crate::albedo::rng_stream;
+use crate::bsdf::single::SingleBounce;
+use crate::bsdf::ScalarBrdf;
+use crate::material::Material;
+use crate::scalar::{Real, Rgb, Vec3};
+use crate::shading::ShadingRecords;
+use plan::{MultiTerm, RenderPlan};
+use rayon::prelude::*;
+use std::f64::consts::FRAC_1_PI;
+
+/// Pixels per rayon task: large enough to amortise scheduling, small enough to balance 2 cores.
+pub const TASK_PIXELS: usize = 1024;
+
+/// Mixed into the stream of an anchor's pixel, so the anchor's estimate is independent of the
+/// pixel's own sub-samples.
+const ANCHOR_STREAMS: u64 = 0x6A09_E667_F3BC_C909;
+
+/// Predicted radiance of the pixels listed in `pixels` (indices into the per-pixel arrays).
+pub fn render_pixels(
+    material: &Material,
+    records: &ShadingRecords,
+    pixels: &[usize],
+    seed: u64,
+) -> Vec<[f64; 3]> {
+    let brdf = material.brdf();
+    render_model(brdf.as_ref(), material.diffuse, records, pixels, seed)
+}
+
+/// Predicted radiance of `pixels` for the specular model `brdf` plus a Lambertian layer of
+/// albedo `diffuse`, at any scalar type: `f64`, or dual numbers whose derivative parts are the
+/// derivatives of the prediction (pathwise, at the same random numbers, for stochastic models).
+pub fn render_model<T: Real, B: ScalarBrdf<T> + ?Sized>(
+    brdf: &B,
+    diffuse: [T; 3],
+    records: &ShadingRecords,
+    pixels: &[usize],
+    seed: u64,
+) -> Vec<[T; 3]> {
+    accumulate(records, pixels, diffuse, seed, |_, s, rng| {
+        brdf.eval_total(
+            Vec3::from_f64(records.wi[s]),
+            Vec3::from_f64(records.wo[s]),
+            rng,
+        )
+    })
+}
+
+/// [`render_model`] through `plan`: `single` is the single-bounce part of `brdf` (the part
+/// that stays exact at every sub-sample when the multiple-bounce term is interpolated or
+/// skipped). With [`RenderPlan::exact`] the result is [`render_model`]'s, bit for bit.
+#[allow(clippy::too_many_arguments)]
+pub fn render_planned<T: Real, B: ScalarBrdf<T> + ?Sized>(
+    brdf: &B,
+    single: &SingleBounce<T>,
+    diffuse: [T; 3],
+    records: &ShadingRecords,
+    pixels: &[usize],
+    plan: &RenderPlan,
+    seed: u64,
+) -> Vec<[T; 3]> {
+    let at = |s: usize| (Vec3::from_f64(records.wi[s]), Vec3::from_f64(records.wo[s]));
+    let spp = records.samples_per_pixel;
+    match (plan.multi_term(single), &plan.repeated) {
+        (MultiTerm::Exact, None) => render_model(brdf, diffuse, records, pixels, seed),
+        (MultiTerm::Skipped, None) => render_model(single, diffuse, records, pixels, seed),
+        (MultiTerm::Exact, Some(repeated)) => {
+            let values = shared_values(repeated, seed, |s, rng| {
+                let (wi, wo) = at(s);
+                brdf.eval_total(wi, wo, rng)
+            });
+            accumulate(records, pixels, diffuse, seed, |k, s, _| {
+                values[repeated.pair_of[k * spp + s % spp] as usize]
+            })
+        }
+        (MultiTerm::Skipped, Some(repeated)) => {
+            let values = shared_values(repeated, seed, |s, _| {
+                let (wi, wo) = at(s);
+                single.eval(wi, wo)
+            });
+            accumulate(records, pixels, diffuse, seed, |k, s, _| {
+                values[repeated.pair_of[k * spp + s % spp] as usize]
+            })
+        }
+        (MultiTerm::Sparse(anchors), repeated) => {
+            let draws = if plan.stochastic { spp } else { 1 };
+            let multi: Vec<Rgb<T>> = anchors
+                .points
+                .par_iter()
+                .map(|a| {
+                    let mut rng = rng_stream(seed ^ ANCHOR_STREAMS, a.pixel as u64);
+                    let (wi, wo) = (Vec3::from_f64(a.wi), Vec3::from_f64(a.wo));
+                    let mut sum = Rgb::splat(T::zero());
+                    for _ in 0..draws {
+                        sum = sum + brdf.eval_split(wi, wo, &mut rng).1;
+                    }
+                    sum.scale(T::c(1.0 / draws as f64))
+                })
+                .collect();
+            let singles = repeated.as_ref().map(|repeated| {
+                shared_values(repeated, seed, |s, _| {
+                    let (wi, wo) = at(s);
+                    single.eval(wi, wo)
+                })
+            });
+            accumulate(records, pixels, diffuse, seed, |k, s, rng| {
+                let Some(corners) = &anchors.corners[k] else {
+                    let (wi, wo) = at(s);
+                    return brdf.eval_total(wi, wo, rng);
+                };
+                let single_value = match (&singles, repeated) {
+                    (Some(values), Some(repeated)) => {
+                        values[repeated.pair_of[k * spp + s % spp] as usize]
+                    }
+                    _ => {
+                        let (wi, wo) = at(s);
+                        single.eval(wi, wo)
+                    }
+                };
+                single_value + anchors::Anchors::interpolate(corners, &multi)
+            })
+        }
+    }
+}
+
+/// [`render_pixels`] through `plan`.
+pub fn render_material(
+    material: &Material,
+    records: &ShadingRecords,
+    pixels: &[usize],
+    plan: &RenderPlan,
+    seed: u64,
+) -> Vec<[f64; 3]> {
+    let brdf = material.brdf();
+    let single = material.single::<f64>();
+    let diffuse = material.diffuse;
+    render_planned(brdf.as_ref(), &single, diffuse, records, pixels, plan, seed)
+}
+
+/// `f` at each distinct direction pair of `repeated`, from a stream of its own.
+fn shared_values<T: Real>(
+    repeated: &repeated::Repeated,
+    seed: u64,
+    f: impl Fn(usize, &mut crate::bsdf::Rng) -> Rgb<T> + Sync,
+) -> Vec<Rgb<T>> {
+    repeated
+        .firsts
+        .par_iter()
+        .with_min_len(TASK_PIXELS)
+        .map(|&s| f(s, &mut rng_stream(seed, repeated::STREAM_FLAG | s as u64)))
+        .collect()
+}
+
+/// The pixel loop every render shares: pixel `k` of `pixels` is the mean over its sub-samples
+/// `s` (global indices) of `(f(k, s, rng) + diffuse / pi) * irradiance[s]`, where `rng` is the
+/// pixel's own stream; sub-samples without irradiance are not evaluated.
+fn accumulate<T: Real>(
+    records: &ShadingRecords,
+    pixels: &[usize],
+    diffuse: [T; 3],
+    seed: u64,
+    f: impl Fn(usize, usize, &mut crate::bsdf::Rng) -> Rgb<T> + Sync,
+) -> Vec<[T; 3]> {
+    let diffuse = diffuse.map(|d| d * T::c(FRAC_1_PI));
+    let spp = records.samples_per_pixel;
+    let mut out = vec![[T::zero(); 3]; pixels.len()];
+    out.par_chunks_mut(TASK_PIXELS)
+        .zip(pixels.par_chunks(TASK_PIXELS))
+        .enumerate()
+        .for_each(|(task, (out, pixels))| {
+            for (i, (value, &p)) in out.iter_mut().zip(pixels).enumerate() {
+                let k = task * TASK_PIXELS + i;
+                let mut rng = rng_stream(seed, p as u64);
+                let mut sum = [T::zero(); 3];
+                for s in p * spp..(p + 1) * spp {
+                    let e = records.irradiance[s];
+                    if e == [0.0; 3] {
+                        continue;
+                    }
+                    let f = f(k, s, &mut rng);
+                    for c in 0..3 {
+                        sum[c] += (f.0[c] + diffuse[c]) * T::c(e[c]);
+                    }
+                }
+                *value = sum.map(|v| v / T::c(spp as f64));
+            }
+        });
+    out
+}
+
+/// Radiance of the pixels listed in `pixels` for a white Lambertian surface (albedo 1, `f = 1/pi`):
+/// the basis of the diffuse term, which is linear in the albedo.
+pub fn lambertian_pixels(records: &ShadingRecords, pixels: &[usize]) -> Vec<[f64; 3]> {
+    let spp = records.samples_per_pixel;
+    pixels
+        .iter()
+        .map(|&p| {
+            let mut sum = [0.0; 3];
+            for e in &records.irradiance[p * spp..(p + 1) * spp] {
+                for c in 0..3 {
+                    sum[c] += e[c] * FRAC_1_PI;
+                }
+            }
+            sum.map(|v| v / spp as f64)
+        })
+        .collect()
+}
+
+/// Predicted radiance of every pixel of every photo.
+pub fn render_all(material: &Material, records: &ShadingRecords, seed: u64) -> Vec<[f64; 3]> {
+    let all: Vec<usize> = (0..records.pixel_count()).collect();
+    render_pixels(material, records, &all, seed)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,232 @@
+//! Scene-aware work skipping for repeated renders of the same pixels (issue #5 item 1): a
+//! [`RenderPlan`] is built once per objective from the records and the model, and every render
+//! of the fit goes through it. Each skip can be switched off (`--no-skip`) for comparison; the
+//! `bench` command measures what each one saves and what it changes.
+//!
+//! | skip (`--no-skip` name) | what is not computed | error it adds |
+//! | --- | --- | --- |
+//! | pixels that cannot matter (always) | pixels of weight 0 (outside the sample, masked, saturated, non-finite, negative) and sub-samples without irradiance | none: they do not enter the loss |
+//! | `repeated` | the BRDF of a sub-sample whose `(wi, wo)` repeats another's ([`super::repeated`]) | none for deterministic models |
+//! | `sparse-multi` | the multiple-bounce term off a grid of anchors ([`super::anchors`]) | at most [`SPARSE_TOLERANCE`] of the RMS radiance, measured on the records with proxy lobes |
+//! | `faint-multi` | the multiple-bounce term when its white albedo at the current roughness, `1 - E_avg(alpha)` (Kulla & Conty 2017, eq. 7), is below [`FAINT_TOLERANCE`] | below [`FAINT_TOLERANCE`] of the energy |
+//!
+//! `sparse-multi` applies to the models whose added term is an additive lobe (`kulla-conty`,
+//! `fast-msx` and the stochastic estimators); `turquin` scales the single lobe, so its added
+//! term has the single lobe's sharpness and is evaluated exactly. `faint-multi` applies to the
+//! energy-conserving models whose multiple scattering is bounded by the energy single
+//! scattering loses; `fast-msx` is not (its lobe can exceed it, see the README), so it keeps its
+//! term.
+
+use super::anchors::Anchors;
+use super::repeated::Repeated;
+use crate::bsdf::albedo_table::AlbedoTable;
+use crate::bsdf::single::SingleBounce;
+use crate::bsdf::Model;
+use crate::material::Material;
+use crate::microfacet::{Height, NdfKind};
+use crate::scalar::Real;
+use crate::shading::ShadingRecords;
+use serde::{Deserialize, Serialize};
+
+/// Largest interpolation error of the sparse multiple-bounce term, relative to the RMS
+/// radiance of the loss pixels: adds about `1e-6` of the squared signal to an L2 loss, against
+/// `4e-4` for 2% photo noise.
+pub const SPARSE_TOLERANCE: f64 = 1e-3;
+
+/// Largest white multiple-scattering albedo that is skipped.
+pub const FAINT_TOLERANCE: f64 = 1e-3;
+
+/// A skip that `--no-skip` can switch off.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Skip {
+    /// One evaluation per distinct `(wi, wo)`.
+    Repeated,
+    /// The multiple-bounce term on an anchor grid, interpolated.
+    SparseMulti,
+    /// No multiple-bounce term where its albedo is negligible.
+    FaintMulti,
+    /// Every skip above.
+    All,
+}
+
+/// Which skips are on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Skips {
+    pub repeated: bool,
+    pub sparse_multi: bool,
+    pub faint_multi: bool,
+}
+
+impl Default for Skips {
+    fn default() -> Self {
+        Skips::all()
+    }
+}
+
+impl Skips {
+    pub fn all() -> Skips {
+        Skips {
+            repeated: true,
+            sparse_multi: true,
+            faint_multi: true,
+        }
+    }
+
+    pub fn none() -> Skips {
+        Skips {
+            repeated: false,
+            sparse_multi: false,
+            faint_multi: false,
+        }
+    }
+
+    /// Every skip except those named (the `--no-skip` list).
+    pub fn except(off: &[Skip]) -> Skips {
+        let mut skips = Skips::all();
+        for skip in off {
+            match skip {
+                Skip::Repeated => skips.repeated = false,
+                Skip::SparseMulti => skips.sparse_multi = false,
+                Skip::FaintMulti => skips.faint_multi = false,
+                Skip::All => skips = Skips::none(),
+            }
+        }
+        skips
+    }
+
+    pub fn any(&self) -> bool {
+        self.repeated || self.sparse_multi || self.faint_multi
+    }
+}
+
+/// What a plan found in the records, for fit files and benchmarks.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PlanSummary {
+    /// Stride of the anchor grid of the multiple-bounce term (1: evaluated at every sub-sample).
+    pub multi_stride: usize,
+    /// Anchors evaluated per render.
+    pub anchors: usize,
+    /// Pixels evaluated exactly because an anchor around them sees no sample.
+    pub exact_pixels: usize,
+    /// BRDF evaluations saved per render by repeated geometry.
+    pub repeated_saved: usize,
+    /// Roughness below which the multiple-bounce term is skipped (0: never).
+    pub faint_below_alpha: f64,
+}
+
+/// How the multiple-bounce term of one render is computed.
+pub enum MultiTerm<'a> {
+    /// At every sub-sample, with the single term.
+    Exact,
+    /// On the anchors, interpolated.
+    Sparse(&'a Anchors),
+    /// Not at all.
+    Skipped,
+}
+
+/// The skips that apply to one model over one pixel list.
+#[derive(Clone)]
+pub struct RenderPlan {
+    pub skips: Skips,
+    pub stochastic: bool,
+    pub anchors: Option<Anchors>,
+    pub repeated: Option<Repeated>,
+    /// Table whose `E_avg` decides `faint-multi`, for the models it applies to.
+    faint: Option<&'static AlbedoTable>,
+}
+
+impl RenderPlan {
+    /// A plan that skips nothing: renders as [`super::render_model`] does.
+    pub fn exact() -> RenderPlan {
+        RenderPlan {
+            skips: Skips::none(),
+            stochastic: false,
+            anchors: None,
+            repeated: None,
+            faint: None,
+        }
+    }
+
+    /// The plan of `model` (with `ndf`, `height`; `stochastic` when its value is an estimate)
+    /// over `pixels` of `records`.
+    pub fn new(
+        skips: Skips,
+        (model, ndf, height, stochastic): (Model, NdfKind, Height, bool),
+        records: &ShadingRecords,
+        pixels: &[usize],
+    ) -> RenderPlan {
+        let sparse_model = !matches!(model, Model::Single | Model::Turquin);
+        let faint_model = !matches!(model, Model::Single | Model::FastMsx);
+        let anchors = (skips.sparse_multi && sparse_model)
+            .then(|| Anchors::choose(records, pixels, ndf, height, SPARSE_TOLERANCE))
+            .flatten();
+        let repeated = skips
+            .repeated
+            .then(|| Repeated::find(records, pixels))
+            .flatten();
+        RenderPlan {
+            skips,
+            stochastic,
+            anchors,
+            repeated,
+            faint: (skips.faint_multi && faint_model).then(|| AlbedoTable::get(ndf, height)),
+        }
+    }
+
+    /// The plan of `material`'s model over `pixels` of `records`.
+    pub fn for_material(
+        skips: Skips,
+        material: &Material,
+        records: &ShadingRecords,
+        pixels: &[usize],
+    ) -> RenderPlan {
+        let stochastic = material.brdf().is_stochastic();
+        let kind = (material.model, material.ndf, material.height, stochastic);
+        RenderPlan::new(skips, kind, records, pixels)
+    }
+
+    /// The multiple-bounce treatment of a render at the roughness of `single`.
+    pub fn multi_term<T: Real>(&self, single: &SingleBounce<T>) -> MultiTerm<'_> {
+        if let Some(table) = self.faint {
+            let mf = &single.microfacet;
+            let alpha = (mf.ax.re64() * mf.ay.re64()).sqrt();
+            if 1.0 - table.e_avg(alpha) < FAINT_TOLERANCE {
+                return MultiTerm::Skipped;
+            }
+        }
+        match &self.anchors {
+            Some(anchors) => MultiTerm::Sparse(anchors),
+            None => MultiTerm::Exact,
+        }
+    }
+
+    pub fn summary(&self) -> PlanSummary {
+        PlanSummary {
+            multi_stride: self.anchors.as_ref().map_or(1, |a| a.stride),
+            anchors: self.anchors.as_ref().map_or(0, |a| a.points.len()),
+            exact_pixels: self.anchors.as_ref().map_or(0, |a| a.exact_pixels()),
+            repeated_saved: self.repeated.as_ref().map_or(0, |r| r.saved()),
+            faint_below_alpha: self.faint.map_or(0.0, faint_threshold),
+        }
+    }
+}
+
+/// The roughness below which `1 - E_avg(alpha) < FAINT_TOLERANCE` (bisection in log alpha;
+/// `E_avg` falls with roughness).
+fn faint_threshold(table: &AlbedoTable) -> f64 {
+    let faint = |alpha: f64| 1.0 - table.e_avg(alpha) < FAINT_TOLERANCE;
+    let (mut lo, mut hi) = (1e-4f64, 3.0f64);
+    if !faint(lo) {
+        return 0.0;
+    }
+    for _ in 0..60 {
+        let mid = (lo * hi).sqrt();
+        if faint(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}

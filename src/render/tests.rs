@@ -1,0 +1,284 @@
+//! The render plan against the exact render: each skip changes the prediction by no more than
+//! its stated bound, and does skip the work it claims to.
+
+use super::anchors::{interpolation_errors, CANDIDATE_STRIDES};
+use super::plan::{MultiTerm, RenderPlan, Skips, FAINT_TOLERANCE, SPARSE_TOLERANCE};
+use super::*;
+use crate::bench::jobs::relative_rms_difference;
+use crate::bsdf::Model;
+use crate::capture::Capture;
+use crate::material::{FresnelSpec, Material};
+use crate::microfacet::{Height, NdfKind};
+use std::path::Path;
+
+/// The pinhole template (9 point lights, the camera 40 degrees off the normal) at `side`
+/// pixels, `spp` sub-samples per pixel; `bracket` appends a copy of every photo at a quarter of
+/// the exposure, as an exposure bracket would.
+fn pinhole_records(side: usize, spp: usize, bracket: bool) -> ShadingRecords {
+    let template = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("datasets/sources/aluminium-pinhole.capture.toml");
+    let mut capture = Capture::open(&template).unwrap();
+    for photo in &mut capture.photos {
+        photo.camera = photo.camera.resampled([side, side]);
+    }
+    if bracket {
+        let darker: Vec<_> = capture
+            .photos
+            .iter()
+            .map(|p| crate::capture::Photo {
+                exposure: p.exposure / 4.0,
+                ..p.clone()
+            })
+            .collect();
+        capture.photos.extend(darker);
+    }
+    ShadingRecords::build(&capture, spp, false).unwrap()
+}
+
+fn material(model: Model, alpha: f64, fresnel: FresnelSpec) -> Material {
+    Material {
+        model,
+        ndf: NdfKind::Ggx,
+        height: Height::Correlated,
+        alpha: [alpha, alpha],
+        fresnel,
+        diffuse: [0.0; 3],
+    }
+}
+
+fn copper() -> FresnelSpec {
+    FresnelSpec::Conductor {
+        eta: [0.2378, 1.0066, 1.2404],
+        k: [3.6264, 2.5823, 2.3929],
+    }
+}
+
+fn lit_pixels(records: &ShadingRecords) -> Vec<usize> {
+    (0..records.pixel_count())
+        .filter(|&p| records.weight[p] > 0.0)
+        .collect()
+}
+
+const SPARSE_ONLY: Skips = Skips {
+    repeated: false,
+    sparse_multi: true,
+    faint_multi: false,
+};
+
+/// The interpolation error grows with the stride (so the choice is a real one), and the plan
+/// takes the largest stride within the tolerance.
+#[test]
+fn the_stride_is_the_largest_within_the_tolerance() {
+    let records = pinhole_records(48, 1, false);
+    let pixels = lit_pixels(&records);
+    let errors = interpolation_errors(&records, &pixels, NdfKind::Ggx, Height::Correlated);
+    assert!(errors[errors.len() - 1] > 4.0 * errors[0], "{errors:?}");
+    let kc = material(Model::KullaConty, 0.3, FresnelSpec::White);
+    let plan = RenderPlan::for_material(SPARSE_ONLY, &kc, &records, &pixels);
+    let stride = plan.anchors.as_ref().map_or(1, |a| a.stride);
+    for (&s, &e) in CANDIDATE_STRIDES.iter().zip(&errors) {
+        assert_eq!(
+            e <= SPARSE_TOLERANCE,
+            s <= stride,
+            "stride {s}: error {e}, chose {stride}"
+        );
+    }
+}
+
+/// Interpolating the analytic lobes changes the render by less than the tolerance (measured
+/// on the same records); pixels next to the sample's edge, whose anchors miss it, are exact.
+#[test]
+fn sparse_multi_stays_within_its_tolerance_for_the_analytic_lobes() {
+    let records = pinhole_records(48, 4, false);
+    let pixels = lit_pixels(&records);
+    for model in [Model::KullaConty, Model::FastMsx] {
+        for alpha in [0.1, 0.35, 1.0] {
+            for fresnel in [FresnelSpec::White, copper()] {
+                let m = material(model, alpha, fresnel);
+                let plan = RenderPlan::for_material(SPARSE_ONLY, &m, &records, &pixels);
+                let anchors = plan.anchors.as_ref().expect("a stride meets the tolerance");
+                assert!(anchors.stride > 1 && anchors.points.len() < pixels.len() / 2);
+                let exact = render_pixels(&m, &records, &pixels, 0);
+                let error = relative_rms_difference(
+                    &render_material(&m, &records, &pixels, &plan, 0),
+                    &exact,
+                );
+                // The bound is measured at each pixel's reference sub-sample with white
+                // Fresnel; sub-sample spread and the Fresnel tint may add a little.
+                assert!(
+                    error <= 1.5 * SPARSE_TOLERANCE,
+                    "{model} alpha {alpha}: {error}"
+                );
+            }
+        }
+    }
+}
+
+/// A stochastic model's sparse render has the exact render's expectation: the means of 400
+/// independent renders of each agree within 4 standard errors plus the interpolation bound.
+#[test]
+fn sparse_multi_keeps_a_stochastic_render_unbiased() {
+    let records = pinhole_records(16, 1, false);
+    let pixels = lit_pixels(&records);
+    let m = material(Model::Bitterli, 0.5, FresnelSpec::White);
+    let plan = RenderPlan::for_material(SPARSE_ONLY, &m, &records, &pixels);
+    assert!(plan.anchors.is_some());
+    let total = |image: Vec<[f64; 3]>| image.iter().map(|v| v[0]).sum::<f64>();
+    let runs = 400;
+    let stats = |render: &dyn Fn(u64) -> Vec<[f64; 3]>| {
+        let values: Vec<f64> = (0..runs).map(|seed| total(render(seed))).collect();
+        let mean = values.iter().sum::<f64>() / runs as f64;
+        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (runs - 1) as f64;
+        (mean, (var / runs as f64).sqrt())
+    };
+    let (sparse, se_sparse) = stats(&|seed| render_material(&m, &records, &pixels, &plan, seed));
+    let (exact, se_exact) = stats(&|seed| render_pixels(&m, &records, &pixels, seed));
+    let bound = 4.0 * se_sparse.hypot(se_exact) + SPARSE_TOLERANCE * exact;
+    assert!(
+        (sparse - exact).abs() <= bound,
+        "{sparse} vs {exact} (+- {bound})"
+    );
+    assert!(se_exact > 0.0 && se_sparse > 0.0);
+}
+
+/// An exposure bracket repeats every direction pair: the plan evaluates each once, saves
+/// exactly the bracket's evaluations, and a deterministic render is bit for bit the exact one.
+#[test]
+fn repeated_geometry_is_evaluated_once_and_changes_nothing() {
+    let records = pinhole_records(24, 4, true);
+    let pixels = lit_pixels(&records);
+    let repeats = Skips {
+        repeated: true,
+        sparse_multi: false,
+        faint_multi: false,
+    };
+    let m = material(Model::KullaConty, 0.3, copper());
+    let plan = RenderPlan::for_material(repeats, &m, &records, &pixels);
+    let repeated = plan.repeated.as_ref().expect("the bracket repeats");
+    let lit = records
+        .irradiance
+        .iter()
+        .filter(|e| **e != [0.0; 3])
+        .count();
+    assert_eq!(repeated.saved(), lit / 2);
+    assert_eq!(
+        render_material(&m, &records, &pixels, &plan, 0),
+        render_pixels(&m, &records, &pixels, 0)
+    );
+    // Without the bracket nothing repeats, and the plan does not pay for the indirection.
+    let single_set = pinhole_records(24, 4, false);
+    let plan = RenderPlan::for_material(repeats, &m, &single_set, &lit_pixels(&single_set));
+    assert!(plan.repeated.is_none());
+}
+
+/// With a stochastic model the two exposures share one estimate per pair: their predictions
+/// are exactly in the ratio of the exposures.
+#[test]
+fn repeated_geometry_shares_a_stochastic_estimate() {
+    let records = pinhole_records(12, 1, true);
+    let all: Vec<usize> = (0..records.pixel_count()).collect();
+    let m = material(Model::Bitterli, 0.5, FresnelSpec::White);
+    let repeats = Skips {
+        repeated: true,
+        sparse_multi: false,
+        faint_multi: false,
+    };
+    let plan = RenderPlan::for_material(repeats, &m, &records, &all);
+    assert!(plan.repeated.is_some());
+    let image = render_material(&m, &records, &all, &plan, 3);
+    let half = all.len() / 2;
+    for (p, (bright, dark)) in image[..half].iter().zip(&image[half..]).enumerate() {
+        for (b, d) in bright.iter().zip(dark) {
+            assert!((d * 4.0 - b).abs() <= 1e-12 * b.abs(), "{p}: {b} {d}");
+        }
+    }
+}
+
+/// Below the roughness where `1 - E_avg` falls under the tolerance the multiple-bounce term is
+/// skipped (the render is the single model's, bit for bit); above it, it is not.
+#[test]
+fn faint_multi_is_skipped_only_where_its_albedo_is_below_the_tolerance() {
+    let records = pinhole_records(16, 1, false);
+    let pixels = lit_pixels(&records);
+    let faint = Skips {
+        repeated: false,
+        sparse_multi: false,
+        faint_multi: true,
+    };
+    let kc = material(Model::KullaConty, 0.3, copper());
+    let plan = RenderPlan::for_material(faint, &kc, &records, &pixels);
+    let threshold = plan.summary().faint_below_alpha;
+    let table = crate::bsdf::albedo_table::AlbedoTable::get(NdfKind::Ggx, Height::Correlated);
+    let lost = |alpha: f64| 1.0 - table.e_avg(alpha);
+    assert!(lost(threshold) < FAINT_TOLERANCE && lost(threshold * 1.01) >= FAINT_TOLERANCE);
+    let below = material(Model::KullaConty, 0.9 * threshold, copper());
+    assert!(matches!(
+        plan.multi_term(&below.single::<f64>()),
+        MultiTerm::Skipped
+    ));
+    let single = Material {
+        model: Model::Single,
+        ..below.clone()
+    };
+    assert_eq!(
+        render_material(&below, &records, &pixels, &plan, 0),
+        render_pixels(&single, &records, &pixels, 0)
+    );
+    let above = material(Model::KullaConty, 1.1 * threshold, copper());
+    assert!(matches!(
+        plan.multi_term(&above.single::<f64>()),
+        MultiTerm::Exact
+    ));
+    // fast-msx's lobe is not bounded by the energy single scattering loses: never skipped.
+    let fast = material(Model::FastMsx, 0.9 * threshold, copper());
+    let plan = RenderPlan::for_material(faint, &fast, &records, &pixels);
+    assert!(matches!(
+        plan.multi_term(&fast.single::<f64>()),
+        MultiTerm::Exact
+    ));
+}
+
+/// Dual numbers flow through the interpolation: the derivative in `ln alpha` of a sparse render
+/// equals the central difference of the `f64` sparse render at the same random numbers.
+#[test]
+fn sparse_renders_differentiate_exactly() {
+    use num_dual::{Dual64, DualNum};
+    let records = pinhole_records(16, 1, false);
+    let pixels = lit_pixels(&records);
+    for model in [Model::KullaConty, Model::Bitterli] {
+        let m = material(model, 0.4, copper());
+        let plan = RenderPlan::for_material(SPARSE_ONLY, &m, &records, &pixels);
+        assert!(plan.anchors.is_some());
+        let at = |ln_alpha: f64| {
+            let alpha = ln_alpha.exp();
+            let m = Material {
+                alpha: [alpha, alpha],
+                ..m.clone()
+            };
+            render_material(&m, &records, &pixels, &plan, 9)
+        };
+        let ln_alpha = Dual64::from_re(0.4f64.ln()).derivative();
+        let alpha = ln_alpha.exp();
+        let mut single = m.single::<Dual64>();
+        single.microfacet.ax = alpha;
+        single.microfacet.ay = alpha;
+        let brdf = crate::bsdf::differentiable(model, single).unwrap();
+        let zero = [Dual64::from_re(0.0); 3];
+        let dual = render_planned(brdf.as_ref(), &single, zero, &records, &pixels, &plan, 9);
+        let h = 1e-5;
+        let (plus, minus) = (at(0.4f64.ln() + h), at(0.4f64.ln() - h));
+        let (mut diff, mut norm) = (0.0, 0.0);
+        for k in 0..pixels.len() {
+            for c in 0..3 {
+                let central = (plus[k][c] - minus[k][c]) / (2.0 * h);
+                diff += (dual[k][c].eps - central).powi(2);
+                norm += central * central;
+            }
+        }
+        assert!(
+            norm > 0.0 && (diff / norm).sqrt() < 1e-4,
+            "{model}: {}",
+            (diff / norm).sqrt()
+        );
+    }
+}
