@@ -446,6 +446,9 @@ pub(super) fn read(manifest: &Path) -> Result<Capture> {
         width: sample_table.required("width", checks::positive)?,
         height: sample_table.required("height", checks::positive)?,
     };
+    let depth = sample_table
+        .optional("depth", checks::non_negative)?
+        .unwrap_or(0.0);
     sample_table.finish(&mut warnings);
     let color = top.optional::<ColorEncoding, _>("color", Ok)?;
     let default_camera = match top.sub_table("camera")? {
@@ -477,6 +480,7 @@ pub(super) fn read(manifest: &Path) -> Result<Capture> {
         units,
         root,
         sample,
+        depth,
         color,
         photos,
         warnings,
@@ -490,9 +494,17 @@ struct ManifestOut<'a> {
     units: &'a str,
     #[serde(skip_serializing_if = "Option::is_none")]
     color: Option<ColorEncoding>,
-    sample: &'a Sample,
+    sample: SampleOut,
     camera: &'a Camera,
     photo: Vec<PhotoOut<'a>>,
+}
+
+#[derive(serde::Serialize)]
+struct SampleOut {
+    width: f64,
+    height: f64,
+    #[serde(skip_serializing_if = "is_zero")]
+    depth: f64,
 }
 
 #[derive(serde::Serialize)]
@@ -514,6 +526,10 @@ struct PhotoOut<'a> {
 
 fn is_one(value: &f64) -> bool {
     *value == 1.0
+}
+
+fn is_zero(value: &f64) -> bool {
+    *value == 0.0
 }
 
 /// Writes `capture` as a manifest at `path` (see [`Capture::save_manifest`]).
@@ -566,7 +582,11 @@ pub(super) fn write(capture: &Capture, path: &Path) -> Result<()> {
         name: &capture.name,
         units: &capture.units,
         color: capture.color,
-        sample: &capture.sample,
+        sample: SampleOut {
+            width: capture.sample.width,
+            height: capture.sample.height,
+            depth: capture.depth,
+        },
         camera: &first.camera,
         photo,
     };

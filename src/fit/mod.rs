@@ -14,6 +14,7 @@
 
 pub mod cholesky;
 pub mod diagnostics;
+pub mod exposure;
 pub mod holdout;
 pub mod laplace;
 pub mod local;
@@ -26,6 +27,7 @@ pub mod projection;
 pub mod sampler;
 pub mod selection;
 pub mod start;
+pub mod uniformity;
 
 use crate::bsdf::Model;
 use crate::error::{Error, Result};
@@ -35,6 +37,7 @@ use crate::microfacet::fresnel::reflectivity_edge_tint_from_ior;
 use crate::progress::Progress;
 use crate::shading::ShadingRecords;
 use argmin::core::Error as ArgminError;
+use exposure::{exposed_records, ExposureEstimate};
 pub use local::TracePoint;
 use local::{LocalOptimizer, Recorder};
 use objective::{GradientMethod, Objective};
@@ -42,6 +45,7 @@ use params::ParamSpace;
 use projection::Projection;
 use serde::{Deserialize, Serialize};
 pub use start::StartMethod;
+use std::borrow::Cow;
 use std::time::Instant;
 
 /// The optimiser of a fit (`--optimizer`).
@@ -148,6 +152,26 @@ pub struct ModelFit {
     pub levels: Vec<LevelResult>,
     pub photos: Vec<PhotoLoss>,
     pub trace: Vec<TracePoint>,
+    /// The fitted exposure (`--fit-exposure`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure: Option<ExposureEstimate>,
+}
+
+impl ModelFit {
+    /// The fitted exposure, 1 when none was fitted.
+    pub fn exposure_value(&self) -> f64 {
+        self.exposure.map_or(1.0, |e| e.value)
+    }
+
+    /// Coordinates of this fit in `space`.
+    pub fn point(&self, space: &ParamSpace) -> Vec<f64> {
+        space.point(&self.material, self.exposure_value())
+    }
+
+    /// `records` as this fit predicts them: irradiance times the fitted exposure.
+    pub fn exposed<'r>(&self, records: &'r ShadingRecords) -> Cow<'r, ShadingRecords> {
+        exposed_records(records, self.exposure_value())
+    }
 }
 
 /// Coarse levels stop before a photo's shorter side falls below this many pixels.
@@ -183,7 +207,7 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
             evaluations: fit.evaluations,
             seconds: level_started.elapsed().as_secs_f64(),
         });
-        start = Some(options.space.point(&fit.material));
+        start = Some(fit.point(&options.space));
     }
     let level_started = Instant::now();
     let mut fit = fit_level(records, options, start, options.progress)?;
@@ -197,6 +221,14 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
     }
     fit.evaluations += evaluations;
     fit.levels = levels;
+    fit.exposure = exposure::estimate(
+        options.space,
+        records,
+        options.loss,
+        options.seed,
+        &fit.point(&options.space),
+        fit.loss,
+    );
     fit.seconds = started.elapsed().as_secs_f64();
     Ok(fit)
 }
@@ -323,6 +355,10 @@ fn fit_level(
         levels: Vec::new(),
         photos,
         trace,
+        exposure: space.exposure.then(|| ExposureEstimate {
+            value: space.exposure(&best_x),
+            interval: None,
+        }),
     })
 }
 

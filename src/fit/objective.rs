@@ -19,6 +19,7 @@ use super::params::ParamSpace;
 use crate::bsdf::differentiable;
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::{render_model, render_pixels};
+use crate::scalar::Real;
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
 use num_dual::DualSVec64;
@@ -186,21 +187,37 @@ impl<'a> Objective<'a> {
 
     /// Predicted radiance of the loss pixels at coordinates `x` (the first render).
     pub fn predict(&self, x: &[f64]) -> Vec<[f64; 3]> {
-        render_pixels(
+        let render = render_pixels(
             &self.space.material(x),
             self.records,
             &self.pixels,
             self.seeds[0],
-        )
+        );
+        self.exposed(render, self.space.exposure(x))
+    }
+
+    /// `render` times the fitted `exposure` (unchanged when the space does not fit one).
+    fn exposed<T: Real>(&self, render: Vec<[T; 3]>, exposure: T) -> Vec<[T; 3]> {
+        if !self.space.exposure {
+            return render;
+        }
+        render
+            .into_iter()
+            .map(|p| p.map(|v| v * exposure))
+            .collect()
     }
 
     /// The renders the loss compares at `x`: one, or two on independent streams for a
     /// stochastic model.
     pub fn renders(&self, x: &[f64]) -> Vec<Vec<[f64; 3]>> {
         let material = self.space.material(x);
+        let exposure = self.space.exposure(x);
         self.seeds
             .iter()
-            .map(|&seed| render_pixels(&material, self.records, &self.pixels, seed))
+            .map(|&seed| {
+                let render = render_pixels(&material, self.records, &self.pixels, seed);
+                self.exposed(render, exposure)
+            })
             .collect()
     }
 
@@ -285,13 +302,14 @@ impl<'a> Objective<'a> {
             .seeds
             .iter()
             .map(|&seed| {
-                render_model(
+                let render = render_model(
                     brdf.as_ref(),
                     surface.diffuse,
                     self.records,
                     &self.pixels,
                     seed,
-                )
+                );
+                self.exposed(render, surface.exposure)
             })
             .collect();
         let values: Vec<Vec<[f64; 3]>> = renders

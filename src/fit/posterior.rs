@@ -318,6 +318,8 @@ mod tests {
             anisotropic: false,
             fresnel: FresnelFamily::Schlick,
             diffuse,
+            known_fresnel: None,
+            exposure: false,
         };
         let spaces = [
             space(Model::Single, false),
