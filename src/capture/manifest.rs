@@ -651,6 +651,39 @@ exposure = 1.0
     }
 
     #[test]
+    fn depth_is_read_checked_saved_and_lifts_positions_in_the_material_frame() {
+        let text = example_with("height = 10.0\n", "height = 10.0\ndepth = 0.25\n");
+        let (dir, path) = write_manifest(&text);
+        let c = Capture::open(&path).unwrap();
+        assert_eq!(c.depth, 0.25);
+        // Positions stay as calibrated; the material frame raises cameras and point lights.
+        assert_eq!(c.photos[0].camera.position().z, 30.0);
+        let lifted = c.in_material_frame();
+        assert_eq!(lifted.depth, 0.0);
+        assert_eq!(lifted.photos[0].camera.position().z, 30.25);
+        match (&lifted.photos[0].camera, &lifted.photos[0].light) {
+            (Camera::Pinhole(p), Light::Point { position, .. }) => {
+                assert_eq!(p.look_at.z, 0.25);
+                assert_eq!(position.z, 30.25);
+            }
+            other => panic!("{other:?}"),
+        }
+        let copy = dir.path().join("copy.toml");
+        c.save_manifest(&copy).unwrap();
+        let back = Capture::open(&copy).unwrap();
+        assert_eq!(back.depth, 0.25);
+        assert_eq!(back.photos, c.photos);
+        let m = error_of(&example_with(
+            "height = 10.0\n",
+            "height = 10.0\ndepth = -1\n",
+        ));
+        assert!(
+            m.contains("sample.depth: must be finite and zero or positive"),
+            "{m}"
+        );
+    }
+
+    #[test]
     fn reads_the_design_example() {
         let (dir, path) = write_manifest(DESIGN_EXAMPLE);
         let c = Capture::open(&path).unwrap();

@@ -113,7 +113,7 @@ pub struct RealCaptureArgs {
     pub depth: Option<f64>,
     /// Fit only the pixels that see this rectangle of the sample: x0,y0,x1,y1 in capture
     /// units, origin at the sample's centre, y towards row 0 of a rectified image.
-    #[arg(long, value_parser = parse_region, conflicts_with = "mask")]
+    #[arg(long, value_parser = parse_region, conflicts_with = "mask", allow_hyphen_values = true)]
     pub region: Option<SampleRegion>,
     /// Fit only the pixels that see nonzero pixels of this image, laid over the whole sample
     /// rectangle (row 0 at +y, as a rectified photo).

@@ -18,7 +18,7 @@ use crate::shading::ShadingRecords;
 use serde::Serialize;
 
 /// Blocks per side of the region's bounding box.
-pub const GRID: usize = 4;
+pub const GRID: usize = 8;
 
 /// Fewest loss pixels that make a block count.
 pub const MIN_PIXELS: usize = 16;
