@@ -5,6 +5,7 @@
 
 mod common;
 
+use bouncefit::capture::image_io::{load_image, ColorEncoding, LinearImage};
 use bouncefit::capture::materialgan_writer;
 use bouncefit::capture::region::pixel_points;
 use bouncefit::capture::Capture;
@@ -115,6 +116,29 @@ fn fit_exposure_recovers_alpha_and_the_true_light_power() {
         lo < exposure && exposure < hi && hi / lo < 1.1,
         "[{lo}, {hi}]"
     );
+
+    // `render` with the fit file predicts the photos at the fitted exposure: the mean over
+    // unclipped pixels of photo 00 agrees to within quantisation (it would be 3x too dark
+    // at the nominal power).
+    let rendered = dir.path().join("render");
+    let fit_file = dir.path().join("fit.json");
+    run_ok(&[
+        "render",
+        "--capture",
+        set.to_str().unwrap(),
+        "--material",
+        fit_file.to_str().unwrap(),
+        "-o",
+        rendered.to_str().unwrap(),
+    ]);
+    let photo = load_image(&set.join("00.png"), ColorEncoding::Gamma(2.2)).unwrap();
+    let render = load_image(&rendered.join("00.exr"), ColorEncoding::Linear).unwrap();
+    let mean = |image: &LinearImage| {
+        let kept = (0..photo.rgb.len()).filter(|&p| !photo.saturated[p]);
+        kept.map(|p| image.rgb[p].iter().sum::<f32>()).sum::<f32>()
+    };
+    let ratio = mean(&render) / mean(&photo);
+    assert!((ratio - 1.0).abs() < 0.01, "render / photo {ratio}");
 
     // Without the known Fresnel only exposure x reflectance is determined: refused.
     let m = fit_refused(&set, dir.path(), &["--fit-exposure"]);

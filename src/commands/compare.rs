@@ -135,6 +135,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         .collect();
     let exposure = display_exposure(&records.target);
     let scale = residual_scale(&records, &predictions);
+    let mut region_lines = Vec::new();
     for (fit, predicted) in fits.iter().zip(&predictions) {
         let model = fit.material.model;
         let model_folder = root.join(model.name());
@@ -143,9 +144,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         let region = region
             .as_ref()
             .map(|applied| RegionReport::new(applied, &records, predicted));
-        if let (Some(region), false) = (&region, args.quiet) {
-            eprintln!("{model}: {}", region.summary());
-        }
+        region_lines.extend(region.as_ref().map(|r| format!("{model}: {}", r.summary())));
         FitFile::new(
             fit,
             fits,
@@ -159,7 +158,8 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         .write(&model_folder.join("fit.json"))?;
     }
 
-    let verdicts = Report::verdicts(&selection, held_out_ranking.as_ref(), &rows);
+    let mut verdicts = Report::verdicts(&selection, held_out_ranking.as_ref(), &rows);
+    verdicts.extend(region_lines);
     let report = Report {
         capture: args.capture.display().to_string(),
         capture_name: capture.name.clone(),

@@ -121,11 +121,15 @@ pub struct RealCaptureArgs {
     pub mask: Option<PathBuf>,
 }
 
+fn is_zero(value: &f64) -> bool {
+    *value == 0.0
+}
+
 fn parse_fresnel(text: &str) -> std::result::Result<FresnelSpec, String> {
     FresnelSpec::parse(text).map_err(|e| e.to_string())
 }
 
-fn parse_depth(text: &str) -> std::result::Result<f64, String> {
+pub(crate) fn parse_depth(text: &str) -> std::result::Result<f64, String> {
     let depth: f64 = text
         .parse()
         .map_err(|_| format!("`{text}` is not a number"))?;
@@ -464,6 +468,9 @@ pub struct FitFile<'a> {
     edge_tint: Option<[f64; 3]>,
     capture: String,
     capture_name: &'a str,
+    /// `--depth` or the manifest's `[sample] depth`, when not 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    depth: f64,
     pixel_samples: usize,
     pixels_used: usize,
     excluded: ExclusionCounts,
@@ -493,6 +500,7 @@ impl<'a> FitFile<'a> {
             edge_tint: edge_tint(&fit.material),
             capture: capture.0.display().to_string(),
             capture_name: &capture.1.name,
+            depth: capture.1.depth,
             pixel_samples: options.pixel_samples,
             pixels_used: records.weight.iter().filter(|w| **w > 0.0).count(),
             excluded: records.excluded,
