@@ -144,6 +144,7 @@ impl ShadingRecords {
                 format!("must be a perfect square (1, 4, 9, ...), got {pixel_samples}"),
             ));
         };
+        let capture = &*capture.in_material_frame();
         let mut records = ShadingRecords {
             samples_per_pixel: pixel_samples,
             ..ShadingRecords::default()
@@ -336,6 +337,7 @@ mod tests {
             root: root.to_path_buf(),
             sample,
             color: None,
+            depth: 0.0,
             photos,
             warnings: Vec::new(),
         }

@@ -291,6 +291,8 @@ mod tests {
                 anisotropic: false,
                 fresnel: FresnelFamily::Schlick,
                 diffuse: false,
+                known_fresnel: None,
+                exposure: false,
             },
             optimizer: Optimizer::Auto,
             loss: LossKind::L2,

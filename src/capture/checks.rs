@@ -12,6 +12,15 @@ pub(crate) fn positive(value: f64) -> Result<f64, String> {
     }
 }
 
+/// A length or offset that must be finite and zero or positive.
+pub(crate) fn non_negative(value: f64) -> Result<f64, String> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(value)
+    } else {
+        Err(format!("must be finite and zero or positive, got {value}"))
+    }
+}
+
 /// A vector whose components must all be finite.
 pub(crate) fn finite(v: [f64; 3]) -> Result<DVec3, String> {
     if v.iter().all(|c| c.is_finite()) {

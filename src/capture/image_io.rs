@@ -551,6 +551,22 @@ mod tests {
     }
 
     #[test]
+    fn eight_bit_png_is_saturated_when_any_channel_is_255() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.png");
+        // Pixels: red at 255, green at 255, blue at 255, every channel at 254.
+        let raw: Vec<u8> = vec![255, 3, 4, 5, 255, 6, 7, 8, 255, 254, 254, 254];
+        image::RgbImage::from_raw(4, 1, raw)
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        let img = load_image(&path, ColorEncoding::Gamma(2.2)).unwrap();
+        assert_eq!(img.saturated, vec![true, true, true, false]);
+        let expected = (254.0f64 / 255.0).powf(2.2) as f32;
+        assert_eq!(img.rgb[3], [expected; 3]);
+    }
+
+    #[test]
     fn sixteen_bit_png_decodes_and_flags_saturation() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("x.png");

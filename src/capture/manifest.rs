@@ -446,6 +446,9 @@ pub(super) fn read(manifest: &Path) -> Result<Capture> {
         width: sample_table.required("width", checks::positive)?,
         height: sample_table.required("height", checks::positive)?,
     };
+    let depth = sample_table
+        .optional("depth", checks::non_negative)?
+        .unwrap_or(0.0);
     sample_table.finish(&mut warnings);
     let color = top.optional::<ColorEncoding, _>("color", Ok)?;
     let default_camera = match top.sub_table("camera")? {
@@ -477,6 +480,7 @@ pub(super) fn read(manifest: &Path) -> Result<Capture> {
         units,
         root,
         sample,
+        depth,
         color,
         photos,
         warnings,
@@ -490,9 +494,17 @@ struct ManifestOut<'a> {
     units: &'a str,
     #[serde(skip_serializing_if = "Option::is_none")]
     color: Option<ColorEncoding>,
-    sample: &'a Sample,
+    sample: SampleOut,
     camera: &'a Camera,
     photo: Vec<PhotoOut<'a>>,
+}
+
+#[derive(serde::Serialize)]
+struct SampleOut {
+    width: f64,
+    height: f64,
+    #[serde(skip_serializing_if = "is_zero")]
+    depth: f64,
 }
 
 #[derive(serde::Serialize)]
@@ -514,6 +526,10 @@ struct PhotoOut<'a> {
 
 fn is_one(value: &f64) -> bool {
     *value == 1.0
+}
+
+fn is_zero(value: &f64) -> bool {
+    *value == 0.0
 }
 
 /// Writes `capture` as a manifest at `path` (see [`Capture::save_manifest`]).
@@ -566,7 +582,11 @@ pub(super) fn write(capture: &Capture, path: &Path) -> Result<()> {
         name: &capture.name,
         units: &capture.units,
         color: capture.color,
-        sample: &capture.sample,
+        sample: SampleOut {
+            width: capture.sample.width,
+            height: capture.sample.height,
+            depth: capture.depth,
+        },
         camera: &first.camera,
         photo,
     };
@@ -628,6 +648,39 @@ exposure = 1.0
     fn example_with(from: &str, to: &str) -> String {
         assert!(DESIGN_EXAMPLE.contains(from), "{from}");
         DESIGN_EXAMPLE.replacen(from, to, 1)
+    }
+
+    #[test]
+    fn depth_is_read_checked_saved_and_lifts_positions_in_the_material_frame() {
+        let text = example_with("height = 10.0\n", "height = 10.0\ndepth = 0.25\n");
+        let (dir, path) = write_manifest(&text);
+        let c = Capture::open(&path).unwrap();
+        assert_eq!(c.depth, 0.25);
+        // Positions stay as calibrated; the material frame raises cameras and point lights.
+        assert_eq!(c.photos[0].camera.position().z, 30.0);
+        let lifted = c.in_material_frame();
+        assert_eq!(lifted.depth, 0.0);
+        assert_eq!(lifted.photos[0].camera.position().z, 30.25);
+        match (&lifted.photos[0].camera, &lifted.photos[0].light) {
+            (Camera::Pinhole(p), Light::Point { position, .. }) => {
+                assert_eq!(p.look_at.z, 0.25);
+                assert_eq!(position.z, 30.25);
+            }
+            other => panic!("{other:?}"),
+        }
+        let copy = dir.path().join("copy.toml");
+        c.save_manifest(&copy).unwrap();
+        let back = Capture::open(&copy).unwrap();
+        assert_eq!(back.depth, 0.25);
+        assert_eq!(back.photos, c.photos);
+        let m = error_of(&example_with(
+            "height = 10.0\n",
+            "height = 10.0\ndepth = -1\n",
+        ));
+        assert!(
+            m.contains("sample.depth: must be finite and zero or positive"),
+            "{m}"
+        );
     }
 
     #[test]

@@ -109,6 +109,7 @@ pub fn import(folder: &Path, image_folder: Option<&str>) -> Result<Capture> {
             height: metadata.size,
         },
         color: Some(ENCODING),
+        depth: 0.0,
         photos,
         warnings: metadata.warnings,
     })

@@ -7,12 +7,13 @@
 
 pub mod atomic_file;
 pub mod camera;
-mod checks;
+pub(crate) mod checks;
 pub mod image_io;
 pub mod light;
 mod manifest;
 pub mod materialgan;
 pub mod materialgan_writer;
+pub mod region;
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -94,6 +95,11 @@ pub struct Capture {
     pub sample: Sample,
     /// The manifest's top-level `color`: the default encoding of every photo, if given.
     pub color: Option<ColorEncoding>,
+    /// How far the sample's surface lies below the plane the cameras and lights were
+    /// calibrated on (the manifest's `[sample] depth`, `--depth`; capture units, >= 0): a
+    /// marker board a little above the material. Positions are stored as calibrated;
+    /// [`Capture::in_material_frame`] applies the offset.
+    pub depth: f64,
     /// The photos, in manifest order.
     pub photos: Vec<Photo>,
     /// Things worth telling the user that are not errors (unknown manifest keys, ignored
@@ -132,6 +138,32 @@ impl Capture {
     /// paths stay relative when the manifest goes to `root`, and become absolute otherwise.
     pub fn save_manifest(&self, path: &Path) -> Result<()> {
         manifest::write(self, path)
+    }
+
+    /// The capture with every position measured from the sample's surface: camera positions
+    /// (and pinhole `look_at`) and point-light positions raised by [`Capture::depth`], depth 0.
+    /// A rectified image covers the sample rectangle on the surface itself (the
+    /// svbrdf-diff-renderer capture code warps the material plane, `depth` below its markers).
+    pub fn in_material_frame(&self) -> std::borrow::Cow<'_, Capture> {
+        if self.depth == 0.0 {
+            return std::borrow::Cow::Borrowed(self);
+        }
+        let lift = DVec3::new(0.0, 0.0, self.depth);
+        let mut lifted = self.clone();
+        lifted.depth = 0.0;
+        for photo in &mut lifted.photos {
+            match &mut photo.camera {
+                Camera::Pinhole(c) => {
+                    c.position += lift;
+                    c.look_at += lift;
+                }
+                Camera::Rectified(c) => c.position += lift,
+            }
+            if let Light::Point { position, .. } = &mut photo.light {
+                *position += lift;
+            }
+        }
+        std::borrow::Cow::Owned(lifted)
     }
 
     /// Resolves an image or mask path of this capture against [`Capture::root`].

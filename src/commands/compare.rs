@@ -6,11 +6,14 @@
 //! | --- | --- |
 //! | `--models` | models to fit (required, distinct) |
 //! | `--holdout K` | K-fold over photos (photo i in fold i mod K): each model is refitted K times without one fold and scored on it |
+//! | `--holdout` (no K) or `--holdout loo` | leave-one-photo-out: K = the number of photos, each photo predicted by a fit to all the others |
 //! | `--mcmc` and its options | one sampler run over all models with jumps between them (as `fit --mcmc`): each row gains its posterior probability and 95% intervals, and `posterior.png` is drawn; checkpoint `<REPORT_DIR>.mcmc-checkpoint.json` |
 //! | fit options | as `fit` ([`FitOptionArgs`]) |
 //! | `-o REPORT_DIR` | staged and renamed into place; an existing non-empty folder needs `--force` |
 
-use super::fit::{fit_and_sample, load_records, select, FitFile, FitOptionArgs, McmcArgs};
+use super::fit::{
+    fit_and_sample, load_records, select, FitFile, FitOptionArgs, McmcArgs, RegionReport,
+};
 use super::images::display_exposure;
 use super::output::StagedFolder;
 use crate::bsdf::Model;
@@ -32,9 +35,9 @@ pub struct CompareArgs {
     #[arg(long, value_delimiter = ',', required = true)]
     pub models: Vec<Model>,
     /// Also fit K times leaving out one fold of photos (photo i in fold i mod K) and report
-    /// the error on the held-out photos.
-    #[arg(long, value_name = "K")]
-    pub holdout: Option<usize>,
+    /// the error on the held-out photos; without K (or `loo`), leave-one-photo-out.
+    #[arg(long, value_name = "K", num_args = 0..=1, default_missing_value = "loo", value_parser = parse_holdout)]
+    pub holdout: Option<Holdout>,
     #[command(flatten)]
     pub options: FitOptionArgs,
     /// Report folder to write.
@@ -50,6 +53,22 @@ pub struct CompareArgs {
     pub mcmc: McmcArgs,
 }
 
+/// `--holdout`: K folds, or one fold per photo.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Holdout {
+    LeaveOneOut,
+    Folds(usize),
+}
+
+fn parse_holdout(text: &str) -> std::result::Result<Holdout, String> {
+    if text == "loo" {
+        return Ok(Holdout::LeaveOneOut);
+    }
+    text.parse().map(Holdout::Folds).map_err(|_| {
+        format!("`{text}` is neither a number of folds nor `loo` (leave-one-photo-out)")
+    })
+}
+
 pub fn run_compare(args: &CompareArgs) -> Result<()> {
     for (i, model) in args.models.iter().enumerate() {
         if args.models[..i].contains(model) {
@@ -59,12 +78,16 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
             ));
         }
     }
-    let capture = super::inputs::open_capture(&args.capture)?;
-    if let Some(folds) = args.holdout {
+    let capture = args.options.real.open(&args.capture)?;
+    let holdout = args.holdout.map(|h| match h {
+        Holdout::LeaveOneOut => capture.photos.len(),
+        Holdout::Folds(k) => k,
+    });
+    if let Some(folds) = holdout {
         check_fold_count(folds, capture.photos.len())?;
     }
     let folder = StagedFolder::new(&args.output, args.force)?;
-    let records = load_records(&args.capture, &capture, args.options.pixel_samples)?;
+    let (records, region) = load_records(&args.capture, &capture, &args.options)?;
     let Some(done) = fit_and_sample(
         &records,
         &args.models,
@@ -82,7 +105,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
     let selection = select(&records, fits, &args.options);
 
     let mut held_out = Vec::new();
-    if let Some(folds) = args.holdout {
+    if let Some(folds) = holdout {
         for &model in &args.models {
             if !args.quiet {
                 eprintln!("{model}: {folds} held-out fits");
@@ -108,15 +131,20 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
     let root = folder.path("");
     let predictions: Vec<Vec<[f64; 3]>> = fits
         .iter()
-        .map(|fit| render_all(&fit.material, &records, args.options.seed))
+        .map(|fit| render_all(&fit.material, &fit.exposed(&records), args.options.seed))
         .collect();
     let exposure = display_exposure(&records.target);
     let scale = residual_scale(&records, &predictions);
+    let mut region_lines = Vec::new();
     for (fit, predicted) in fits.iter().zip(&predictions) {
         let model = fit.material.model;
         let model_folder = root.join(model.name());
         std::fs::create_dir(&model_folder).map_err(|e| Error::io(&model_folder, e))?;
         write_model_images(&root, model, &records, predicted, exposure, scale)?;
+        let region = region
+            .as_ref()
+            .map(|applied| RegionReport::new(applied, &records, predicted));
+        region_lines.extend(region.as_ref().map(|r| format!("{model}: {}", r.summary())));
         FitFile::new(
             fit,
             fits,
@@ -126,17 +154,19 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
             &records,
             &args.options,
         )
+        .with_region(region)
         .write(&model_folder.join("fit.json"))?;
     }
 
-    let verdicts = Report::verdicts(&selection, held_out_ranking.as_ref(), &rows);
+    let mut verdicts = Report::verdicts(&selection, held_out_ranking.as_ref(), &rows);
+    verdicts.extend(region_lines);
     let report = Report {
         capture: args.capture.display().to_string(),
         capture_name: capture.name.clone(),
         photos: records.photos.iter().map(|p| p.stem.clone()).collect(),
         pixels_used: records.weight.iter().filter(|w| **w > 0.0).count(),
         loss_kind: args.options.loss,
-        holdout_folds: args.holdout,
+        holdout_folds: holdout,
         models: rows,
         selection,
         held_out_ranking,

@@ -63,10 +63,14 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
 
 /// The scene of the capture named by the fit file's `capture` field, else the default flash.
 fn scene_of(fit: &Path) -> Scene {
-    let named = std::fs::read_to_string(fit)
+    let file = std::fs::read_to_string(fit)
         .ok()
-        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok());
+    let named = file
+        .as_ref()
         .and_then(|value| value.get("capture")?.as_str().map(str::to_owned));
+    // A fit made with --depth records it; the scene puts the camera and light that much higher.
+    let depth = file.as_ref().and_then(|value| value.get("depth")?.as_f64());
     let Some(named) = named else {
         return Scene::default_flash("the input names no capture");
     };
@@ -74,8 +78,12 @@ fn scene_of(fit: &Path) -> Scene {
     let opened = Capture::open(Path::new(&named))
         .or_else(|first| Capture::open(&beside_fit).map_err(|_| first));
     match opened {
-        Ok(capture) => Scene::from_capture(&capture, &named)
-            .unwrap_or_else(|| Scene::default_flash(&format!("capture '{named}' has no photos"))),
+        Ok(mut capture) => {
+            capture.depth = depth.unwrap_or(capture.depth);
+            Scene::from_capture(&capture.in_material_frame(), &named).unwrap_or_else(|| {
+                Scene::default_flash(&format!("capture '{named}' has no photos"))
+            })
+        }
         Err(err) => Scene::default_flash(&format!("capture '{named}' not readable: {err}")),
     }
 }

@@ -5,6 +5,7 @@
 use super::images::{display_exposure, write_photo_images};
 use super::output::{check_overwrite, StagedFolder};
 use crate::bsdf::Model;
+use crate::capture::region::{AppliedRegion, SampleRegion};
 use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::mcmc::{sample_posterior, McmcOptions, PosteriorRun};
@@ -13,8 +14,10 @@ use crate::fit::params::{FresnelFamily, ParamSpace};
 use crate::fit::posterior::Posterior;
 use crate::fit::sampler::Schedule;
 use crate::fit::selection::{GaussianFit, Selection};
+use crate::fit::uniformity::{self, Uniformity};
 use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
+use crate::material::FresnelSpec;
 use crate::microfacet::{Height, NdfKind};
 use crate::render::plan::{Skip, Skips};
 use crate::render::render_all;
@@ -93,6 +96,121 @@ pub struct FitOptionArgs {
     /// faint-multi, all); see `bouncefit::render::plan`.
     #[arg(long, value_enum, value_delimiter = ',')]
     pub no_skip: Vec<Skip>,
+    #[command(flatten)]
+    pub real: RealCaptureArgs,
+}
+
+/// Options for real captures (README "Real flash captures").
+#[derive(clap::Args, Debug, Clone)]
+pub struct RealCaptureArgs {
+    /// Fit one global exposure scale (true / nominal light power) with the material and report
+    /// it with its 95% interval; needs --fresnel-known (photos see exposure x reflectance).
+    #[arg(long)]
+    pub fit_exposure: bool,
+    /// Hold the Fresnel at this known value instead of fitting it (syntax of `brdf --fresnel`,
+    /// e.g. conductor:0.2378,1.0066,1.2404:3.6264,2.5823,2.3929 for copper).
+    #[arg(long, value_parser = parse_fresnel)]
+    pub fresnel_known: Option<FresnelSpec>,
+    /// The sample's surface lies this far below the plane the cameras and lights were
+    /// calibrated on (capture units, e.g. a marker board 0.1 cm above the material); replaces
+    /// the manifest's `[sample] depth`.
+    #[arg(long, value_parser = parse_depth)]
+    pub depth: Option<f64>,
+    /// Fit only the pixels that see this rectangle of the sample: x0,y0,x1,y1 in capture
+    /// units, origin at the sample's centre, y towards row 0 of a rectified image.
+    #[arg(long, value_parser = parse_region, conflicts_with = "mask", allow_hyphen_values = true)]
+    pub region: Option<SampleRegion>,
+    /// Fit only the pixels that see nonzero pixels of this image, laid over the whole sample
+    /// rectangle (row 0 at +y, as a rectified photo).
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+}
+
+fn is_zero(value: &f64) -> bool {
+    *value == 0.0
+}
+
+fn parse_fresnel(text: &str) -> std::result::Result<FresnelSpec, String> {
+    FresnelSpec::parse(text).map_err(|e| e.to_string())
+}
+
+pub(crate) fn parse_depth(text: &str) -> std::result::Result<f64, String> {
+    let depth: f64 = text
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number"))?;
+    crate::capture::checks::non_negative(depth)
+}
+
+fn parse_region(text: &str) -> std::result::Result<SampleRegion, String> {
+    SampleRegion::parse_rectangle(text).map_err(|e| e.to_string())
+}
+
+impl RealCaptureArgs {
+    /// Opens the photo set (printing its warnings) with `--depth` applied.
+    pub fn open(&self, path: &Path) -> Result<Capture> {
+        let mut capture = super::inputs::open_capture(path)?;
+        if let Some(depth) = self.depth {
+            capture.depth = depth;
+        }
+        Ok(capture)
+    }
+
+    /// The region of `--region` or `--mask`, if any.
+    fn region(&self) -> Result<Option<SampleRegion>> {
+        match (&self.region, &self.mask) {
+            (Some(region), _) => Ok(Some(region.clone())),
+            (None, Some(mask)) => SampleRegion::load_mask(mask).map(Some),
+            (None, None) => Ok(None),
+        }
+    }
+}
+
+/// The `region` entry of a fit file: which part of the sample was fitted and how uniform it
+/// looks under the fit ([`crate::fit::uniformity`]).
+#[derive(Serialize)]
+pub struct RegionReport {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rectangle: Option<[f64; 4]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mask: Option<String>,
+    /// Loss pixels left out because they see the sample outside the region.
+    pixels_excluded: usize,
+    uniformity: Option<Uniformity>,
+}
+
+impl RegionReport {
+    /// The report of `applied` for a fit that predicts `predicted` for every pixel.
+    pub fn new(
+        applied: &AppliedRegion,
+        records: &ShadingRecords,
+        predicted: &[[f64; 3]],
+    ) -> RegionReport {
+        let (rectangle, mask) = match &applied.region {
+            SampleRegion::Rectangle(r) => (Some(*r), None),
+            SampleRegion::Mask { path, .. } => (None, Some(path.display().to_string())),
+        };
+        RegionReport {
+            rectangle,
+            mask,
+            pixels_excluded: applied.excluded,
+            uniformity: uniformity::measure(records, predicted, applied),
+        }
+    }
+
+    /// One line for stderr.
+    pub fn summary(&self) -> String {
+        match &self.uniformity {
+            Some(u) => format!(
+                "region: block ratio photo/fit spread {:.3} over {} blocks (range {:.3}..{:.3}): {}",
+                u.ratio_spread,
+                u.blocks,
+                u.ratio_range[0],
+                u.ratio_range[1],
+                if u.uniform { "looks uniform" } else { "not uniform" }
+            ),
+            None => "region: too few pixels per block to judge uniformity".into(),
+        }
+    }
 }
 
 /// `--mcmc` and its options (see `bouncefit::fit::mcmc`).
@@ -138,6 +256,8 @@ impl FitOptionArgs {
             anisotropic: self.anisotropic,
             fresnel: self.fresnel,
             diffuse: self.diffuse,
+            known_fresnel: self.real.fresnel_known,
+            exposure: self.real.fit_exposure,
         }
     }
 
@@ -177,15 +297,22 @@ impl FitOptionArgs {
     }
 }
 
-/// The photo set's shading records with targets, refusing a set with no usable pixel (all
-/// excluded, the counts by reason in the message) or whose usable pixels are all black, which
-/// no material with positive reflectance can fit.
+/// The photo set's shading records with targets, restricted to `--region` or `--mask` (then
+/// also returned), refusing a set with no usable pixel (all excluded, the counts by reason in
+/// the message) or whose usable pixels are all black, which no material with positive
+/// reflectance can fit.
 pub fn load_records(
     capture_path: &Path,
     capture: &Capture,
-    pixel_samples: usize,
-) -> Result<ShadingRecords> {
-    let records = ShadingRecords::build(capture, pixel_samples, true)?;
+    options: &FitOptionArgs,
+) -> Result<(ShadingRecords, Option<AppliedRegion>)> {
+    let mut records = ShadingRecords::build(capture, options.pixel_samples, true)?;
+    let region = match options.real.region()? {
+        Some(region) if records.weight.iter().any(|w| *w > 0.0) => {
+            Some(region.apply(capture, &mut records)?)
+        }
+        _ => None,
+    };
     let usable = || {
         records
             .target
@@ -223,7 +350,7 @@ pub fn load_records(
             e.negative
         );
     }
-    Ok(records)
+    Ok((records, region))
 }
 
 /// What [`fit_and_sample`] produced: a fit per model and, with `--mcmc`, the posterior run.
@@ -261,6 +388,10 @@ pub fn fit_and_sample(
     if models.is_empty() {
         return Err(Error::argument("--models", "no model given"));
     }
+    options
+        .space(models[0])
+        .check()
+        .map_err(|m| Error::argument("--fit-exposure", m))?;
     let checkpoint = mcmc
         .checkpoint
         .clone()
@@ -313,7 +444,12 @@ pub fn select(records: &ShadingRecords, fits: &[ModelFit], options: &FitOptionAr
         .iter()
         .map(|fit| {
             let parameters = options.space(fit.material.model).dim();
-            GaussianFit::measure(&fit.material, records, parameters, options.seed)
+            GaussianFit::measure(
+                &fit.material,
+                &fit.exposed(records),
+                parameters,
+                options.seed,
+            )
         })
         .collect();
     Selection::rank(&measured)
@@ -338,6 +474,9 @@ pub struct FitFile<'a> {
     edge_tint: Option<[f64; 3]>,
     capture: String,
     capture_name: &'a str,
+    /// `--depth` or the manifest's `[sample] depth`, when not 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    depth: f64,
     pixel_samples: usize,
     pixels_used: usize,
     excluded: ExclusionCounts,
@@ -347,6 +486,8 @@ pub struct FitFile<'a> {
     selection: &'a Selection,
     #[serde(skip_serializing_if = "Option::is_none")]
     posterior: Option<&'a Posterior>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    region: Option<RegionReport>,
 }
 
 impl<'a> FitFile<'a> {
@@ -365,6 +506,7 @@ impl<'a> FitFile<'a> {
             edge_tint: edge_tint(&fit.material),
             capture: capture.0.display().to_string(),
             capture_name: &capture.1.name,
+            depth: capture.1.depth,
             pixel_samples: options.pixel_samples,
             pixels_used: records.weight.iter().filter(|w| **w > 0.0).count(),
             excluded: records.excluded,
@@ -382,7 +524,14 @@ impl<'a> FitFile<'a> {
                 .collect(),
             selection,
             posterior,
+            region: None,
         }
+    }
+
+    /// The same file with a `region` entry.
+    pub fn with_region(mut self, region: Option<RegionReport>) -> Self {
+        self.region = region;
+        self
     }
 
     /// Write the file as pretty JSON, atomically.
@@ -394,14 +543,14 @@ impl<'a> FitFile<'a> {
 }
 
 pub fn run_fit(args: &FitArgs) -> Result<()> {
-    let capture = super::inputs::open_capture(&args.capture)?;
+    let capture = args.options.real.open(&args.capture)?;
     let output = args
         .output
         .clone()
         .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
     check_overwrite(&output, args.force)?;
     let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
-    let records = load_records(&args.capture, &capture, args.options.pixel_samples)?;
+    let (records, region) = load_records(&args.capture, &capture, &args.options)?;
     let Some(done) = fit_and_sample(
         &records,
         &args.models,
@@ -427,6 +576,13 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
             .find(|f| f.material.model == selection.preferred)
             .expect("the preferred model is one of the fits"),
     };
+
+    // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure).
+    let predicted = render_all(&best.material, &best.exposed(&records), args.options.seed);
+    let region = region.map(|applied| RegionReport::new(&applied, &records, &predicted));
+    if let (Some(region), false) = (&region, args.quiet) {
+        eprintln!("{}", region.summary());
+    }
     let file = FitFile::new(
         best,
         fits,
@@ -435,10 +591,8 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         (&args.capture, &capture),
         &records,
         &args.options,
-    );
-
-    // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure).
-    let predicted = render_all(&best.material, &records, args.options.seed);
+    )
+    .with_region(region);
     let residual: Vec<[f64; 3]> = predicted
         .iter()
         .zip(&records.target)

@@ -1,5 +1,5 @@
 //! `bouncefit synth` (make a photo set from a material and a capture) and `bouncefit render`
-//! (re-render a photo set with a material or fit).
+//! (re-render a photo set with a material or fit, a fit's `exposure` applied).
 
 use super::images::{display_exposure, write_photo_images};
 use super::inputs::{load_material, open_capture};
@@ -7,6 +7,7 @@ use super::output::StagedFolder;
 use crate::albedo::rng_stream;
 use crate::capture::image_io::ColorEncoding;
 use crate::error::{Error, Result};
+use crate::fit::exposure::exposed_records;
 use crate::render::render_all;
 use crate::shading::ShadingRecords;
 use rand_distr::{Distribution, StandardNormal};
@@ -61,6 +62,10 @@ pub struct RenderArgs {
     pub pixel_samples: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// The sample's surface lies this far below the plane the cameras and lights were
+    /// calibrated on (as `fit --depth`).
+    #[arg(long, value_parser = super::fit::parse_depth)]
+    pub depth: Option<f64>,
     #[arg(long)]
     pub force: bool,
 }
@@ -128,10 +133,24 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
     Ok(())
 }
 
+/// The exposure a fit file records (`fit --fit-exposure`), 1 for a material file.
+fn fitted_exposure(path: &std::path::Path) -> f64 {
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        .and_then(|value| value.get("exposure")?.get("value")?.as_f64())
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .unwrap_or(1.0)
+}
+
 pub fn run_render(args: &RenderArgs) -> Result<()> {
     let material = load_material(&args.material)?;
-    let capture = open_capture(&args.capture)?;
+    let mut capture = open_capture(&args.capture)?;
+    if let Some(depth) = args.depth {
+        capture.depth = depth;
+    }
     let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
+    let records = exposed_records(&records, fitted_exposure(&args.material));
     let folder = StagedFolder::new(&args.output, args.force)?;
     let pixels = render_all(&material, &records, args.seed);
     write_photo_images(

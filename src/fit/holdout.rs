@@ -72,7 +72,13 @@ pub fn cross_validate(
             let training = records.restricted_to_photos(|i| fold_of(i, folds) != fold);
             let held_out = records.restricted_to_photos(|i| fold_of(i, folds) == fold);
             let fit = fit_model(&training, options)?;
-            loss_of(&fit.material, &held_out, options.loss, options.seed).ok_or_else(|| {
+            loss_of(
+                &fit.material,
+                &fit.exposed(&held_out),
+                options.loss,
+                options.seed,
+            )
+            .ok_or_else(|| {
                 let stems: Vec<&str> = records
                     .photos
                     .iter()

@@ -32,6 +32,7 @@
 //! | --- | --- | --- |
 //! | `alpha`, `alpha_x`, `alpha_y` | log-uniform on [1e-3, 3] | `u = ln alpha` uniform on [ln 1e-3, ln 3]: `1 / ln 3000`, zero outside |
 //! | F0, conductor reflectivity and edge tint, diffuse (per channel) | uniform on (0, 1) | `y = logit p`: `p (1 - p)` (the Jacobian of the logit) |
+//! | `exposure` | log-uniform on [1e-3, 1e3] | `u = ln s` uniform on [ln 1e-3, ln 1e3] |
 //!
 //! Gradients of the likelihood come from the `Gradient` implementation of [`Objective`] (today
 //! central differences with common random numbers), so any exact gradient put behind that trait
@@ -62,6 +63,9 @@ const FD_STEP: f64 = 1e-5;
 
 /// Support of the log-uniform roughness prior.
 pub const ALPHA_PRIOR: [f64; 2] = [1e-3, 3.0];
+
+/// Support of the log-uniform exposure prior.
+pub const EXPOSURE_PRIOR: [f64; 2] = [1e-3, 1e3];
 
 /// How the loss is read as a negative log-likelihood.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -134,7 +138,7 @@ impl Noise {
 /// Prior of one coordinate.
 #[derive(Clone, Copy, Debug)]
 enum Prior {
-    /// `ln alpha` uniform on `[ln lo, ln hi]`.
+    /// `ln` of the parameter uniform on `[ln lo, ln hi]`.
     LogUniform { lo: f64, hi: f64 },
     /// `logit p` with `p` uniform on (0, 1).
     LogitUniform,
@@ -227,6 +231,11 @@ impl<'a> LogPosterior<'a> {
                     Prior::LogUniform {
                         lo: ALPHA_PRIOR[0],
                         hi: ALPHA_PRIOR[1],
+                    }
+                } else if name == "ln_exposure" {
+                    Prior::LogUniform {
+                        lo: EXPOSURE_PRIOR[0],
+                        hi: EXPOSURE_PRIOR[1],
                     }
                 } else {
                     debug_assert!(name.starts_with("logit_"), "{name}");

@@ -237,7 +237,7 @@ fn prepare(
                 options.schedule.seed,
                 noise,
             );
-            Laplace::at_mode(&target, &space.point(&map.material))
+            Laplace::at_mode(&target, &map.point(&space))
         })
         .collect();
     Ok(Setup {

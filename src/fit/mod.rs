@@ -14,6 +14,7 @@
 
 pub mod cholesky;
 pub mod diagnostics;
+pub mod exposure;
 pub mod holdout;
 pub mod laplace;
 pub mod local;
@@ -26,6 +27,7 @@ pub mod projection;
 pub mod sampler;
 pub mod selection;
 pub mod start;
+pub mod uniformity;
 
 use crate::bsdf::Model;
 use crate::error::{Error, Result};
@@ -36,6 +38,7 @@ use crate::progress::Progress;
 use crate::render::plan::{PlanSummary, Skips};
 use crate::shading::ShadingRecords;
 use argmin::core::Error as ArgminError;
+use exposure::{exposed_records, ExposureEstimate};
 pub use local::TracePoint;
 use local::{LocalOptimizer, Recorder};
 use objective::{GradientMethod, Objective};
@@ -43,6 +46,7 @@ use params::ParamSpace;
 use projection::Projection;
 use serde::{Deserialize, Serialize};
 pub use start::StartMethod;
+use std::borrow::Cow;
 use std::time::Instant;
 
 /// The optimiser of a fit (`--optimizer`).
@@ -154,6 +158,26 @@ pub struct ModelFit {
     /// What the renders of the final level skipped (`render::plan`).
     #[serde(default)]
     pub render_plan: PlanSummary,
+    /// The fitted exposure (`--fit-exposure`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure: Option<ExposureEstimate>,
+}
+
+impl ModelFit {
+    /// The fitted exposure, 1 when none was fitted.
+    pub fn exposure_value(&self) -> f64 {
+        self.exposure.map_or(1.0, |e| e.value)
+    }
+
+    /// Coordinates of this fit in `space`.
+    pub fn point(&self, space: &ParamSpace) -> Vec<f64> {
+        space.point(&self.material, self.exposure_value())
+    }
+
+    /// `records` as this fit predicts them: irradiance times the fitted exposure.
+    pub fn exposed<'r>(&self, records: &'r ShadingRecords) -> Cow<'r, ShadingRecords> {
+        exposed_records(records, self.exposure_value())
+    }
 }
 
 /// Coarse levels stop before a photo's shorter side falls below this many pixels.
@@ -189,7 +213,7 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
             evaluations: fit.evaluations,
             seconds: level_started.elapsed().as_secs_f64(),
         });
-        start = Some(options.space.point(&fit.material));
+        start = Some(fit.point(&options.space));
     }
     let level_started = Instant::now();
     let mut fit = fit_level(records, options, start, options.progress)?;
@@ -203,6 +227,14 @@ pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<Model
     }
     fit.evaluations += evaluations;
     fit.levels = levels;
+    fit.exposure = exposure::estimate(
+        options.space,
+        records,
+        options.loss,
+        options.seed,
+        &fit.point(&options.space),
+        fit.loss,
+    );
     fit.seconds = started.elapsed().as_secs_f64();
     Ok(fit)
 }
@@ -333,6 +365,10 @@ fn fit_level(
         photos,
         trace,
         render_plan: objective.plan_summary(),
+        exposure: space.exposure.then(|| ExposureEstimate {
+            value: space.exposure(&best_x),
+            interval: None,
+        }),
     })
 }
 

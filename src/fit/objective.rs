@@ -20,6 +20,7 @@ use crate::bsdf::differentiable;
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::plan::{PlanSummary, RenderPlan, Skips};
 use crate::render::{render_material, render_planned};
+use crate::scalar::Real;
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
 use num_dual::DualSVec64;
@@ -220,16 +221,29 @@ impl<'a> Objective<'a> {
 
     /// Predicted radiance of the loss pixels at coordinates `x` (the first render).
     pub fn predict(&self, x: &[f64]) -> Vec<[f64; 3]> {
-        self.render(&self.space.material(x), self.seeds[0])
+        let render = self.render(&self.space.material(x), self.seeds[0]);
+        self.exposed(render, self.space.exposure(x))
+    }
+
+    /// `render` times the fitted `exposure` (unchanged when the space does not fit one).
+    fn exposed<T: Real>(&self, render: Vec<[T; 3]>, exposure: T) -> Vec<[T; 3]> {
+        if !self.space.exposure {
+            return render;
+        }
+        render
+            .into_iter()
+            .map(|p| p.map(|v| v * exposure))
+            .collect()
     }
 
     /// The renders the loss compares at `x`: one, or two on independent streams for a
     /// stochastic model.
     pub fn renders(&self, x: &[f64]) -> Vec<Vec<[f64; 3]>> {
         let material = self.space.material(x);
+        let exposure = self.space.exposure(x);
         self.seeds
             .iter()
-            .map(|&seed| self.render(&material, seed))
+            .map(|&seed| self.exposed(self.render(&material, seed), exposure))
             .collect()
     }
 
@@ -314,7 +328,7 @@ impl<'a> Objective<'a> {
             .seeds
             .iter()
             .map(|&seed| {
-                render_planned(
+                let render = render_planned(
                     brdf.as_ref(),
                     &surface.single,
                     surface.diffuse,
@@ -322,7 +336,8 @@ impl<'a> Objective<'a> {
                     &self.pixels,
                     self.plan(),
                     seed,
-                )
+                );
+                self.exposed(render, surface.exposure)
             })
             .collect();
         let values: Vec<Vec<[f64; 3]>> = renders

@@ -7,6 +7,13 @@
 //! | Schlick `f0` per channel | `logit f0` | (0, 1) |
 //! | conductor per channel | `logit r`, `logit g`: Gulbrandsen 2014 reflectivity (= F0) and edge tint | `eta, k` of the family |
 //! | `diffuse` per channel | `logit rho` | (0, 1) |
+//! | `exposure` (`--fit-exposure`), last | `ln s` | (0, inf) |
+//!
+//! With a known Fresnel (`--fresnel-known`) the Fresnel has no coordinates. The exposure `s`
+//! multiplies every prediction (a global light power or camera gain). A flash photo determines
+//! only the product of `s` and the reflectance (the Fresnel is seen at normal incidence, and the
+//! diffuse albedo scales like `s`), so the exposure is fitted only with a known Fresnel
+//! ([`ParamSpace::check`]).
 //!
 //! The conductor is searched in (r, g) rather than (eta, k) because the data constrain F0 = r
 //! directly (a co-located flash sees the Fresnel term only at normal incidence), while eta and k
@@ -42,6 +49,11 @@ pub struct ParamSpace {
     pub anisotropic: bool,
     pub fresnel: FresnelFamily,
     pub diffuse: bool,
+    /// The Fresnel held at this value (no Fresnel coordinates) instead of searched in
+    /// `fresnel`'s family.
+    pub known_fresnel: Option<FresnelSpec>,
+    /// Fit a global exposure scale (the last coordinate, `ln_exposure`).
+    pub exposure: bool,
 }
 
 /// Logistic function, kept away from exactly 0 and 1; generic so coordinates may carry
@@ -67,16 +79,37 @@ pub struct Surface<T> {
     pub single: SingleBounce<T>,
     /// Lambertian albedo per channel.
     pub diffuse: [T; 3],
+    /// Factor on every prediction (1 unless the exposure is fitted).
+    pub exposure: T,
 }
 
 impl ParamSpace {
     pub fn dim(&self) -> usize {
         let alpha = if self.anisotropic { 2 } else { 1 };
-        let fresnel = match self.fresnel {
-            FresnelFamily::Schlick => 3,
-            FresnelFamily::Conductor => 6,
+        let fresnel = match (self.known_fresnel, self.fresnel) {
+            (Some(_), _) => 0,
+            (None, FresnelFamily::Schlick) => 3,
+            (None, FresnelFamily::Conductor) => 6,
         };
-        alpha + fresnel + if self.diffuse { 3 } else { 0 }
+        alpha + fresnel + if self.diffuse { 3 } else { 0 } + usize::from(self.exposure)
+    }
+
+    /// Refuses a space whose coordinates the photos cannot determine: a fitted exposure with
+    /// a searched Fresnel (only their product is seen, see the module docs).
+    pub fn check(&self) -> Result<(), String> {
+        if self.exposure && self.known_fresnel.is_none() {
+            return Err(
+                "a fitted exposure needs a known Fresnel (--fresnel-known): the photos \
+                 determine only exposure x reflectance"
+                    .into(),
+            );
+        }
+        Ok(())
+    }
+
+    /// The exposure at coordinates `x`: `exp` of the last coordinate, or 1 when not fitted.
+    pub fn exposure(&self, x: &[f64]) -> f64 {
+        self.surface(x).exposure
     }
 
     /// Coordinate names, in order, for traces and reports.
@@ -87,15 +120,19 @@ impl ParamSpace {
             vec!["ln_alpha".to_string()]
         };
         let rgb = |p: &str| ["r", "g", "b"].map(|c| format!("{p}_{c}"));
-        match self.fresnel {
-            FresnelFamily::Schlick => names.extend(rgb("logit_f0")),
-            FresnelFamily::Conductor => {
+        match (self.known_fresnel, self.fresnel) {
+            (Some(_), _) => {}
+            (None, FresnelFamily::Schlick) => names.extend(rgb("logit_f0")),
+            (None, FresnelFamily::Conductor) => {
                 names.extend(rgb("logit_reflectivity"));
                 names.extend(rgb("logit_edge_tint"));
             }
         }
         if self.diffuse {
             names.extend(rgb("logit_diffuse"));
+        }
+        if self.exposure {
+            names.push("ln_exposure".into());
         }
         names
     }
@@ -109,14 +146,15 @@ impl ParamSpace {
             let a = x[0].exp();
             (a, a, &x[1..])
         };
-        let (fresnel, rest) = match self.fresnel {
-            FresnelFamily::Schlick => (
+        let (fresnel, rest) = match (self.known_fresnel, self.fresnel) {
+            (Some(known), _) => (known.to_fresnel(), rest),
+            (None, FresnelFamily::Schlick) => (
                 Fresnel::Schlick {
                     f0: Rgb([0, 1, 2].map(|c| sigmoid(rest[c]))),
                 },
                 &rest[3..],
             ),
-            FresnelFamily::Conductor => {
+            (None, FresnelFamily::Conductor) => {
                 let ior = [0, 1, 2].map(|c| {
                     ior_from_reflectivity_edge_tint(sigmoid(rest[c]), sigmoid(rest[3 + c]))
                 });
@@ -129,10 +167,15 @@ impl ParamSpace {
                 )
             }
         };
-        let diffuse = if self.diffuse {
-            [0, 1, 2].map(|c| sigmoid(rest[c]))
+        let (diffuse, rest) = if self.diffuse {
+            ([0, 1, 2].map(|c| sigmoid(rest[c])), &rest[3..])
         } else {
-            [T::zero(); 3]
+            ([T::zero(); 3], rest)
+        };
+        let exposure = if self.exposure {
+            rest[0].exp()
+        } else {
+            T::one()
         };
         Surface {
             single: SingleBounce {
@@ -141,16 +184,20 @@ impl ParamSpace {
                 height: self.height,
             },
             diffuse,
+            exposure,
         }
     }
 
     /// The material at coordinates `x`.
     pub fn material(&self, x: &[f64]) -> Material {
-        let Surface { single, diffuse } = self.surface(x);
-        let fresnel = match single.fresnel {
-            Fresnel::Schlick { f0 } => FresnelSpec::Schlick { f0: f0.0 },
-            Fresnel::Conductor { eta, k } => FresnelSpec::Conductor { eta: eta.0, k: k.0 },
-            Fresnel::White | Fresnel::Dielectric { .. } => {
+        let Surface {
+            single, diffuse, ..
+        } = self.surface(x);
+        let fresnel = match (self.known_fresnel, single.fresnel) {
+            (Some(known), _) => known,
+            (None, Fresnel::Schlick { f0 }) => FresnelSpec::Schlick { f0: f0.0 },
+            (None, Fresnel::Conductor { eta, k }) => FresnelSpec::Conductor { eta: eta.0, k: k.0 },
+            (None, Fresnel::White | Fresnel::Dielectric { .. }) => {
                 unreachable!("a fit searches Schlick or conductor Fresnel")
             }
         };
@@ -164,27 +211,32 @@ impl ParamSpace {
         }
     }
 
-    /// Coordinates of a material (its Fresnel converted to this space's family through F0).
-    pub fn point(&self, m: &Material) -> Vec<f64> {
+    /// Coordinates of a material (its Fresnel converted to this space's family through F0)
+    /// under `exposure` (ignored when the space does not fit it).
+    pub fn point(&self, m: &Material, exposure: f64) -> Vec<f64> {
         let mut x = if self.anisotropic {
             vec![m.alpha[0].ln(), m.alpha[1].ln()]
         } else {
             vec![(m.alpha[0] * m.alpha[1]).sqrt().ln()]
         };
-        match (self.fresnel, m.fresnel) {
-            (FresnelFamily::Conductor, FresnelSpec::Conductor { eta, k }) => {
+        match (self.known_fresnel, self.fresnel, m.fresnel) {
+            (Some(_), _, _) => {}
+            (None, FresnelFamily::Conductor, FresnelSpec::Conductor { eta, k }) => {
                 let rg = [0, 1, 2].map(|c| reflectivity_edge_tint_from_ior(eta[c], k[c]));
                 x.extend(rg.map(|p| logit(p.0)));
                 x.extend(rg.map(|p| logit(p.1)));
             }
-            (FresnelFamily::Conductor, other) => {
+            (None, FresnelFamily::Conductor, other) => {
                 x.extend(other.f0().map(logit));
                 x.extend([logit(0.5); 3]);
             }
-            (FresnelFamily::Schlick, other) => x.extend(other.f0().map(logit)),
+            (None, FresnelFamily::Schlick, other) => x.extend(other.f0().map(logit)),
         }
         if self.diffuse {
             x.extend(m.diffuse.map(|d| logit(d.max(1e-3))));
+        }
+        if self.exposure {
+            x.push(exposure.ln());
         }
         x
     }
@@ -196,10 +248,16 @@ mod tests {
 
     #[test]
     fn coordinates_round_trip() {
-        for (anisotropic, fresnel, diffuse) in [
-            (false, FresnelFamily::Schlick, false),
-            (true, FresnelFamily::Conductor, true),
-            (false, FresnelFamily::Conductor, false),
+        let copper = FresnelSpec::Conductor {
+            eta: [0.2, 0.9, 1.1],
+            k: [3.9, 2.4, 2.1],
+        };
+        for (anisotropic, fresnel, diffuse, known_fresnel, exposure) in [
+            (false, FresnelFamily::Schlick, false, None, false),
+            (true, FresnelFamily::Conductor, true, None, false),
+            (false, FresnelFamily::Conductor, false, None, false),
+            (false, FresnelFamily::Schlick, false, Some(copper), true),
+            (true, FresnelFamily::Schlick, true, Some(copper), true),
         ] {
             let space = ParamSpace {
                 model: Model::Single,
@@ -208,15 +266,38 @@ mod tests {
                 anisotropic,
                 fresnel,
                 diffuse,
+                known_fresnel,
+                exposure,
             };
+            space.check().unwrap();
             let x: Vec<f64> = (0..space.dim()).map(|i| 0.3 * i as f64 - 1.0).collect();
             let m = space.material(&x);
             m.validate().unwrap();
-            let y = space.point(&m);
+            if let Some(known) = known_fresnel {
+                assert_eq!(m.fresnel, known);
+            }
+            let s = space.exposure(&x);
+            assert_eq!(s, if exposure { x[x.len() - 1].exp() } else { 1.0 });
+            let y = space.point(&m, s);
             assert_eq!(space.names().len(), space.dim());
             for (a, b) in x.iter().zip(&y) {
                 assert!((a - b).abs() < 1e-8, "{x:?} vs {y:?}");
             }
         }
+    }
+
+    #[test]
+    fn exposure_with_a_searched_fresnel_is_refused() {
+        let space = ParamSpace {
+            model: Model::Single,
+            ndf: NdfKind::Ggx,
+            height: Height::Correlated,
+            anisotropic: false,
+            fresnel: FresnelFamily::Schlick,
+            diffuse: false,
+            known_fresnel: None,
+            exposure: true,
+        };
+        assert!(space.check().unwrap_err().contains("--fresnel-known"));
     }
 }

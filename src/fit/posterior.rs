@@ -9,7 +9,7 @@
 //!
 //! | field | meaning |
 //! | --- | --- |
-//! | `params` | model-averaged (pooled over all kept draws of all chains and models) mean and central 95% interval (2.5% and 97.5% sample quantiles) of each material parameter, named as in the material file: `alpha` (isotropic) or `alpha_x`, `alpha_y`; `f0` (every Fresnel family); `eta`, `k` (conductors); `diffuse` (when any candidate fits it; 0 in draws of models without it). Each entry also carries `ess` and `rhat` |
+//! | `params` | model-averaged (pooled over all kept draws of all chains and models) mean and central 95% interval (2.5% and 97.5% sample quantiles) of each material parameter, named as in the material file: `alpha` (isotropic) or `alpha_x`, `alpha_y`; `f0` (every Fresnel family); `eta`, `k` (conductors); `diffuse` (when any candidate fits it; 0 in draws of models without it); `exposure` (`--fit-exposure`). Each entry also carries `ess` and `rhat` |
 //! | `models` | posterior probability of each model name: the share of kept draws in it (summed over with and without diffuse) |
 //! | `diffuse_probability` | share of draws in a candidate with diffuse, when diffuse is a choice |
 //! | `rhat_max`, `ess_min` | worst rank-normalised split R-hat and smallest bulk ESS over the entries of `params` |
@@ -131,6 +131,9 @@ fn named_values(spaces: &[ParamSpace], draw: &Draw) -> NamedValues {
     }
     if spaces.iter().any(|s| s.diffuse) {
         values.push(("diffuse", material.diffuse.to_vec()));
+    }
+    if spaces.iter().any(|s| s.exposure) {
+        values.push(("exposure", vec![space.exposure(&draw.x)]));
     }
     values
 }
@@ -318,6 +321,8 @@ mod tests {
             anisotropic: false,
             fresnel: FresnelFamily::Schlick,
             diffuse,
+            known_fresnel: None,
+            exposure: false,
         };
         let spaces = [
             space(Model::Single, false),

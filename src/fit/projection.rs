@@ -149,7 +149,7 @@ impl<'o, 'r> Projection<'o, 'r> {
     /// (conductor Fresnel, or a loss that is not a weighted squared error).
     pub fn new(objective: &'o Objective<'r>) -> Option<Self> {
         let space = objective.space;
-        if space.fresnel != FresnelFamily::Schlick {
+        if space.fresnel != FresnelFamily::Schlick || space.known_fresnel.is_some() {
             return None;
         }
         let weights = objective.image_loss().quadratic_weights()?;

@@ -4,7 +4,7 @@
 //! | --- | --- | --- |
 //! | `projection` | Schlick Fresnel and a squared-error loss (the default fits) | the projected loss ([`super::projection`]) over roughness only: the roughness scan below, then Brent's method (isotropic) or Nelder-Mead (anisotropic) around the best node |
 //! | `pso` | `--optimizer pso` | argmin's particle swarm over the box [`search_box`] of all coordinates, with a seeded generator |
-//! | `scan` | otherwise | the roughness scan with a white Fresnel whose per-channel scale is solved in closed form; conductors start at edge tint [`START_EDGE_TINT`] |
+//! | `scan` | otherwise | the roughness scan with a white Fresnel whose per-channel scale is solved in closed form; conductors start at edge tint [`START_EDGE_TINT`]; with a known Fresnel, the scan renders it and one scale common to the channels is the start exposure |
 //! | random | `--starts N`, for starts 2..N | uniform draws in [`search_box`], seeded |
 
 use super::local::simplex_around;
@@ -51,12 +51,14 @@ const PSO_PARTICLES: usize = 20;
 const PSO_ITERATIONS: u64 = 30;
 
 /// The box of the global phases, in coordinates: alpha in [0.005, 2.5], colour logits in
-/// [-5, 5] (F0 in [0.007, 0.993]), diffuse logits in [-7, 0] (albedo in [0.001, 0.5]).
+/// [-5, 5] (F0 in [0.007, 0.993]), diffuse logits in [-7, 0] (albedo in [0.001, 0.5]),
+/// exposure in [0.01, 100].
 pub fn search_box(space: &ParamSpace) -> (Vec<f64>, Vec<f64>) {
     let roughness = if space.anisotropic { 2 } else { 1 };
-    let colour = match space.fresnel {
-        FresnelFamily::Schlick => 3,
-        FresnelFamily::Conductor => 6,
+    let colour = match (space.known_fresnel, space.fresnel) {
+        (Some(_), _) => 0,
+        (None, FresnelFamily::Schlick) => 3,
+        (None, FresnelFamily::Conductor) => 6,
     };
     let mut lower = vec![0.005f64.ln(); roughness];
     let mut upper = vec![2.5f64.ln(); roughness];
@@ -65,6 +67,10 @@ pub fn search_box(space: &ParamSpace) -> (Vec<f64>, Vec<f64>) {
     if space.diffuse {
         lower.extend([-7.0; 3]);
         upper.extend([0.0; 3]);
+    }
+    if space.exposure {
+        lower.push(0.01f64.ln());
+        upper.push(100.0f64.ln());
     }
     (lower, upper)
 }
@@ -84,9 +90,10 @@ pub fn random_points(space: &ParamSpace, seed: u64, count: usize) -> Vec<Vec<f64
         .collect()
 }
 
-/// The scan start: the node alpha whose white-Fresnel prediction, scaled per channel by the
-/// least-squares factor `sum p t / sum p^2`, has the lowest squared error.
-pub fn scan_start(objective: &Objective) -> Material {
+/// The scan start and its exposure: the node alpha whose white-Fresnel prediction, scaled per
+/// channel by the least-squares factor `sum p t / sum p^2`, has the lowest squared error. With
+/// a known Fresnel the probe has it, and one factor common to the channels is the exposure.
+pub fn scan_start(objective: &Objective) -> (Material, f64) {
     let space = objective.space;
     let records = objective.records();
     let pixels = objective.pixels();
@@ -97,32 +104,45 @@ pub fn scan_start(objective: &Objective) -> Material {
             ndf: space.ndf,
             height: space.height,
             alpha: [alpha; 2],
-            fresnel: FresnelSpec::White,
+            fresnel: space.known_fresnel.unwrap_or(FresnelSpec::White),
             diffuse: [0.0; 3],
         };
         let predicted = render_pixels(&probe, records, pixels, objective.seed());
-        let mut err = 0.0;
-        let mut scale = [0.0; 3];
-        for c in 0..3 {
-            let (mut pt, mut pp, mut tt) = (0.0, 0.0, 0.0);
+        let mut sums = [[0.0; 3]; 3];
+        for (c, [pt, pp, tt]) in sums.iter_mut().enumerate() {
             for (k, &p) in pixels.iter().enumerate() {
                 let (w, t, q) = (records.weight[p], records.target[p][c], predicted[k][c]);
-                pt += w * q * t;
-                pp += w * q * q;
-                tt += w * t * t;
+                *pt += w * q * t;
+                *pp += w * q * q;
+                *tt += w * t * t;
             }
-            scale[c] = if pp > 0.0 { pt / pp } else { 0.0 };
-            err += tt - scale[c] * pt;
         }
+        let ratio = |pt: f64, pp: f64| if pp > 0.0 { pt / pp } else { 0.0 };
+        let scale = if space.known_fresnel.is_some() {
+            let common = ratio(
+                sums.iter().map(|s| s[0]).sum(),
+                sums.iter().map(|s| s[1]).sum(),
+            );
+            [common; 3]
+        } else {
+            sums.map(|[pt, pp, _]| ratio(pt, pp))
+        };
+        let err: f64 = (0..3)
+            .map(|c| {
+                let [pt, pp, tt] = sums[c];
+                tt - 2.0 * scale[c] * pt + scale[c] * scale[c] * pp
+            })
+            .sum();
         if best.is_none_or(|b| err < b.0) {
             best = Some((err, alpha, scale));
         }
     }
     let (_, alpha, scale) = best.expect("the scan has points");
     let f0 = scale.map(|s| s.clamp(0.02, 0.98));
-    let fresnel = match space.fresnel {
-        FresnelFamily::Schlick => FresnelSpec::Schlick { f0 },
-        FresnelFamily::Conductor => {
+    let fresnel = match (space.known_fresnel, space.fresnel) {
+        (Some(known), _) => known,
+        (None, FresnelFamily::Schlick) => FresnelSpec::Schlick { f0 },
+        (None, FresnelFamily::Conductor) => {
             let ior = f0.map(|r| ior_from_reflectivity_edge_tint(r, START_EDGE_TINT));
             FresnelSpec::Conductor {
                 eta: ior.map(|p| p.0),
@@ -130,14 +150,20 @@ pub fn scan_start(objective: &Objective) -> Material {
             }
         }
     };
-    Material {
+    let material = Material {
         model: space.model,
         ndf: space.ndf,
         height: space.height,
         alpha: [alpha; 2],
         fresnel,
         diffuse: if space.diffuse { [0.02; 3] } else { [0.0; 3] },
-    }
+    };
+    let exposure = if space.known_fresnel.is_some() && scale[0] > 0.0 {
+        scale[0]
+    } else {
+        1.0
+    };
+    (material, exposure)
 }
 
 /// The projected loss as an argmin cost over roughness coordinates (a vector, or one scalar).
@@ -212,5 +238,6 @@ pub fn swarm_start(objective: &Objective, seed: u64) -> Result<Vec<f64>, ArgminE
 
 /// Start coordinates of the scan start.
 pub fn scan_point(objective: &Objective) -> Vec<f64> {
-    objective.space.point(&scan_start(objective))
+    let (material, exposure) = scan_start(objective);
+    objective.space.point(&material, exposure)
 }

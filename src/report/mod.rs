@@ -114,6 +114,9 @@ impl HeldOut {
 pub struct Parameter {
     pub name: String,
     pub value: f64,
+    /// Central 95% interval where the fit computes one itself (the exposure's Laplace interval).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interval: Option<[f64; 2]>,
 }
 
 /// One model's line of the report.
@@ -179,6 +182,7 @@ fn parameters_of(fit: &ModelFit) -> Vec<Parameter> {
         out.push(Parameter {
             name: name.into(),
             value,
+            interval: None,
         })
     };
     if m.alpha[0] == m.alpha[1] {
@@ -200,6 +204,13 @@ fn parameters_of(fit: &ModelFit) -> Vec<Parameter> {
         for (c, v) in rgb.iter().zip(m.diffuse) {
             push(&format!("diffuse_{c}"), v);
         }
+    }
+    if let Some(exposure) = fit.exposure {
+        out.push(Parameter {
+            name: "exposure".into(),
+            value: exposure.value,
+            interval: exposure.interval,
+        });
     }
     out
 }
@@ -276,7 +287,10 @@ impl Report {
                 let parameters: Vec<String> = row
                     .parameters
                     .iter()
-                    .map(|p| format!("{} {:.4}", p.name, p.value))
+                    .map(|p| match p.interval {
+                        Some([lo, hi]) => format!("{} {:.4} [{lo:.4}, {hi:.4}]", p.name, p.value),
+                        None => format!("{} {:.4}", p.name, p.value),
+                    })
                     .collect();
                 let intervals = row.posterior.as_ref().map_or_else(not_available, |post| {
                     post.params
@@ -362,7 +376,11 @@ impl Report {
             (
                 "held-out folds",
                 self.holdout_folds.map_or("none".to_string(), |k| {
-                    format!("{k} (photo i in fold i mod {k})")
+                    if k == self.photos.len() {
+                        format!("{k}: leave-one-photo-out (each photo predicted by a fit to the others)")
+                    } else {
+                        format!("{k} (photo i in fold i mod {k})")
+                    }
                 }),
             ),
             (

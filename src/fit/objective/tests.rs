@@ -106,6 +106,8 @@ fn check_model(model: Model) {
                 anisotropic,
                 fresnel,
                 diffuse: true,
+                known_fresnel: None,
+                exposure: false,
             };
             let truth = space.material(&random_point(&space, &mut rng));
             let records = synthetic_records(&truth);
@@ -159,6 +161,8 @@ fn heitz_falls_back_to_finite_differences() {
         anisotropic: false,
         fresnel: FresnelFamily::Schlick,
         diffuse: false,
+        known_fresnel: None,
+        exposure: false,
     };
     let records = ShadingRecords::default();
     let objective = Objective::new(space, &records, LossKind::L2, 0);
@@ -248,6 +252,8 @@ fn check_pathwise(model: Model) {
                 anisotropic: false,
                 fresnel,
                 diffuse: true,
+                known_fresnel: None,
+                exposure: false,
             };
             let truth = space.material(&random_point(&space, &mut rng));
             let records = synthetic_records(&truth);
