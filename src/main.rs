@@ -36,6 +36,10 @@ enum Command {
     Compare(commands::compare::CompareArgs),
     /// Sweep every model over extreme inputs and count NaN, Inf, negative values and energy gain.
     Stress(commands::stress::StressArgs),
+    /// One image operation of the fitter (decode, encode, downsample, blur, ssim) on files.
+    Image(commands::image::ImageArgs),
+    /// Cameras, sample corners and sample points of a photo set as JSON, with pixel positions.
+    Records(commands::records::RecordsArgs),
 }
 
 fn main() -> ExitCode {
@@ -49,6 +53,8 @@ fn main() -> ExitCode {
         Command::Fit(args) => commands::fit::run_fit(args),
         Command::Export(args) => commands::export::run_export(args),
         Command::Compare(args) => commands::compare::run_compare(args),
+        Command::Image(args) => commands::image::run_image(args),
+        Command::Records(args) => commands::records::run_records(args),
         // Findings (NaN, Inf, negative values) exit with 1; bad input with 2 as everywhere.
         Command::Stress(args) => match commands::stress::run_stress(args) {
             Ok(false) => return ExitCode::from(1),
