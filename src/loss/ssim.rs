@@ -211,11 +211,10 @@ pub fn similarity(
 ) -> Vec<[f64; 3]> {
     let mut out = vec![[0.0; 3]; predicted.len()];
     for (photo, pixels) in pixels_by_photo(layout).iter().enumerate() {
-        for c in 0..3 {
-            let maps = channel_maps(layout.sizes[photo], pixels, c, predicted, target, weight);
-            for &(k, o) in pixels {
-                out[k][c] = maps.s[o];
-            }
+        let maps = [0, 1, 2]
+            .map(|c| channel_maps(layout.sizes[photo], pixels, c, predicted, target, weight));
+        for &(k, o) in pixels {
+            out[k] = [0, 1, 2].map(|c| maps[c].s[o]);
         }
     }
     out
