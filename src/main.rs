@@ -38,6 +38,10 @@ enum Command {
     Stress(commands::stress::StressArgs),
     /// Time and error of every model's estimator against heitz, and render and fit jobs.
     Bench(commands::bench::BenchArgs),
+    /// One image operation of the fitter (decode, encode, downsample, blur, ssim) on files.
+    Image(commands::image::ImageArgs),
+    /// Cameras, sample corners and sample points of a photo set as JSON, with pixel positions.
+    Records(commands::records::RecordsArgs),
 }
 
 fn main() -> ExitCode {
@@ -52,6 +56,8 @@ fn main() -> ExitCode {
         Command::Export(args) => commands::export::run_export(args),
         Command::Compare(args) => commands::compare::run_compare(args),
         Command::Bench(args) => commands::bench::run_bench(args),
+        Command::Image(args) => commands::image::run_image(args),
+        Command::Records(args) => commands::records::run_records(args),
         // Findings (NaN, Inf, negative values) exit with 1; bad input with 2 as everywhere.
         Command::Stress(args) => match commands::stress::run_stress(args) {
             Ok(false) => return ExitCode::from(1),

@@ -673,3 +673,165 @@ fn bad_input_exits_2_naming_the_file_and_writes_nothing() {
     ]);
     assert_eq!(Material::load(&output).unwrap(), load(SCHLICK_FIT));
 }
+
+/// `export --scene CAPTURE -o FOLDER` for a capture: the scenes, by photo stem.
+fn export_scenes(capture: &str) -> Vec<(String, String)> {
+    let dir = tempfile::tempdir().unwrap();
+    let output = dir.path().join("scenes");
+    run_ok(&[
+        "export",
+        CONDUCTOR_FIT,
+        "--format",
+        "mitsuba",
+        "--scene",
+        repo(capture).to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+    ]);
+    folder_entries(&output)
+        .into_iter()
+        .map(|name| {
+            let text = std::fs::read_to_string(output.join(&name)).unwrap();
+            (name.trim_end_matches(".xml").to_string(), text)
+        })
+        .collect()
+}
+
+/// The single element with tag `tag` (and `type` attribute `kind`) of a scene.
+fn only<'a>(document: &'a roxmltree::Document<'a>, tag: &str) -> roxmltree::Node<'a, 'a> {
+    let found: Vec<_> = document
+        .descendants()
+        .filter(|n| n.has_tag_name(tag) && n.parent().is_some_and(|p| p.has_tag_name("scene")))
+        .collect();
+    assert_eq!(found.len(), 1, "one <{tag}> per scene");
+    found[0]
+}
+
+fn xyz_attributes(node: roxmltree::Node) -> [f64; 3] {
+    ["x", "y", "z"].map(|a| node.attribute(a).unwrap().parse().unwrap())
+}
+
+#[test]
+fn mitsuba_scene_folder_has_one_scene_per_photo_with_its_camera_and_light() {
+    for capture in ["datasets/copper-flash", "datasets/aluminium-pinhole"] {
+        let records: serde_json::Value =
+            serde_json::from_str(&run_ok(&["records", repo(capture).to_str().unwrap()])).unwrap();
+        let photos = records["photos"].as_array().unwrap();
+        let scenes = export_scenes(capture);
+        assert_eq!(scenes.len(), photos.len(), "{capture}");
+        for ((stem, text), photo) in scenes.iter().zip(photos) {
+            assert_eq!(stem, photo["stem"].as_str().unwrap());
+            let document = roxmltree::Document::parse(text).unwrap();
+            let sensor = only(&document, "sensor");
+            let emitter = only(&document, "emitter");
+            assert_eq!(emitter.attribute("type"), Some("point"));
+            let lookat = sensor
+                .descendants()
+                .find(|n| n.has_tag_name("lookat"))
+                .unwrap();
+            let origin = rgb(lookat.attribute("origin").unwrap());
+            assert_eq!(
+                origin,
+                triple(&photo["camera"]["position"]),
+                "{capture} {stem}"
+            );
+            let position = emitter
+                .children()
+                .find(|n| n.attribute("name") == Some("position"))
+                .unwrap();
+            let light = &photo["light"];
+            let expected = match light["kind"].as_str().unwrap() {
+                "flash" => origin,
+                _ => triple(&light["position"]),
+            };
+            assert_eq!(xyz_attributes(position), expected, "{capture} {stem}");
+            let exposure = photo["exposure"].as_f64().unwrap();
+            let intensity = rgb(mitsuba_parameter(emitter, "intensity").unwrap());
+            assert_eq!(intensity, triple(&light["intensity"]).map(|v| v * exposure));
+            let film = sensor
+                .descendants()
+                .find(|n| n.has_tag_name("film"))
+                .unwrap();
+            let resolution = ["width", "height"].map(|k| mitsuba_parameter(film, k).unwrap());
+            let expected = photo["resolution"].as_array().unwrap();
+            assert_eq!(
+                resolution.map(|v| v.parse::<u64>().unwrap()).to_vec(),
+                expected
+                    .iter()
+                    .map(|v| v.as_u64().unwrap())
+                    .collect::<Vec<_>>()
+            );
+            assert!(film
+                .children()
+                .any(|n| n.has_tag_name("rfilter") && n.attribute("type") == Some("box")));
+            // The field of view spans the image height at the camera's focal length: a
+            // pinhole's fy, or for a rectified image the sample's height at the camera's depth.
+            let fov = mitsuba_parameter(sensor, "fov")
+                .unwrap()
+                .parse::<f64>()
+                .unwrap();
+            let half_height = photo["resolution"][1].as_f64().unwrap() / 2.0;
+            let focal = match photo["camera"]["model"].as_str().unwrap() {
+                "pinhole" => photo["camera"]["fy"].as_f64().unwrap(),
+                _ => half_height * 2.0 * origin[2] / records["sample"]["height"].as_f64().unwrap(),
+            };
+            let expected_fov = 2.0 * (half_height / focal).atan().to_degrees();
+            assert!((fov - expected_fov).abs() < 1e-12, "{fov} {expected_fov}");
+        }
+    }
+}
+
+#[test]
+fn mitsuba_rectified_camera_centres_the_sample_with_the_principal_point() {
+    // Photo 01 of copper-flash has its camera at (3, 3.2, 17.2) over an 8 x 8 sample: the film
+    // centre must look at the sample centre, (-3/8, 3.2/8) of the film away from the axis.
+    let scenes = export_scenes("datasets/copper-flash");
+    let (_, text) = scenes.iter().find(|(stem, _)| stem == "01").unwrap();
+    let document = roxmltree::Document::parse(text).unwrap();
+    let sensor = only(&document, "sensor");
+    let offset = ["principal_point_offset_x", "principal_point_offset_y"].map(|k| {
+        mitsuba_parameter(sensor, k)
+            .unwrap()
+            .parse::<f64>()
+            .unwrap()
+    });
+    assert_eq!(offset, [-3.0 / 8.0, 3.2 / 8.0]);
+}
+
+#[test]
+fn scene_export_needs_the_mitsuba_format_and_writes_nothing_otherwise() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = dir.path().join("scenes");
+    let capture = repo("datasets/copper-flash");
+    let stderr = run_bad(&[
+        "export",
+        CONDUCTOR_FIT,
+        "--format",
+        "gltf",
+        "--scene",
+        capture.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+    ]);
+    assert!(
+        stderr.contains("--scene") && stderr.contains("mitsuba"),
+        "{stderr}"
+    );
+    let missing = dir.path().join("missing");
+    let stderr = run_bad(&[
+        "export",
+        CONDUCTOR_FIT,
+        "--format",
+        "mitsuba",
+        "--scene",
+        missing.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+    ]);
+    assert!(stderr.contains("missing"), "{stderr}");
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        0,
+        "nothing written"
+    );
+}

@@ -1,10 +1,12 @@
 //! `bouncefit brdf` and `bouncefit albedo`: evaluate one model at one configuration.
 
-use super::{parse_direction, MaterialArgs};
+use super::{parse_direction, unit_direction, MaterialArgs};
 use crate::albedo::{directional_albedo, rng_stream};
+use crate::bsdf::{Brdf, Rng};
 use crate::error::{Error, Result};
 use crate::scalar::Vec3;
 use serde_json::json;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
@@ -12,11 +14,16 @@ pub struct BrdfArgs {
     #[command(flatten)]
     pub material: MaterialArgs,
     /// Direction toward the light, X,Y,Z (normalised by the tool).
-    #[arg(long, allow_hyphen_values = true)]
-    pub wi: String,
+    #[arg(long, allow_hyphen_values = true, required_unless_present = "pairs")]
+    pub wi: Option<String>,
     /// Direction toward the camera, X,Y,Z.
-    #[arg(long, allow_hyphen_values = true)]
-    pub wo: String,
+    #[arg(long, allow_hyphen_values = true, required_unless_present = "pairs")]
+    pub wo: Option<String>,
+    /// Evaluate many direction pairs in one run: a JSON file `[[wi, wo], ...]` with each
+    /// direction `[x, y, z]`; prints JSON with `f` (and `f_single`, `f_multi`, `stderr`) as
+    /// lists in the file's order.
+    #[arg(long, conflicts_with_all = ["wi", "wo"])]
+    pub pairs: Option<PathBuf>,
     /// Monte Carlo samples for stochastic models (analytic models evaluate once).
     #[arg(long, default_value_t = 4096)]
     pub samples: usize,
@@ -43,25 +50,20 @@ pub struct AlbedoArgs {
     pub json: bool,
 }
 
-/// Evaluate `f(wi, wo)`; stochastic models average `samples` independent estimates.
-pub fn run_brdf(args: &BrdfArgs) -> Result<()> {
-    let material = args.material.material()?;
-    let wi = parse_direction("--wi", &args.wi)?;
-    let wo = parse_direction("--wo", &args.wo)?;
-    if args.samples == 0 {
-        return Err(Error::argument("--samples", "must be at least 1"));
-    }
-    let brdf = material.brdf();
-    let start = Instant::now();
-    let n = if brdf.is_stochastic() {
-        args.samples
-    } else {
-        1
-    };
+/// `f(wi, wo)` split into the single bounce and the mean of the multi-bounce estimates, with
+/// the latter's standard error.
+struct Estimate {
+    f: [f64; 3],
+    single: [f64; 3],
+    multi: [f64; 3],
+    stderr: [f64; 3],
+}
+
+/// Evaluate `f(wi, wo)`; stochastic models average `n` independent estimates.
+fn estimate(brdf: &dyn Brdf, wi: Vec3<f64>, wo: Vec3<f64>, n: usize, rng: &mut Rng) -> Estimate {
     let (mut sum, mut sum2, mut single) = ([0.0; 3], [0.0; 3], [0.0; 3]);
-    let mut rng = rng_stream(args.seed, 0);
     for _ in 0..n {
-        let v = brdf.eval(wi, wo, &mut rng);
+        let v = brdf.eval(wi, wo, rng);
         single = v.single;
         for c in 0..3 {
             sum[c] += v.multi[c];
@@ -76,16 +78,96 @@ pub fn run_brdf(args: &BrdfArgs) -> Result<()> {
             0.0
         }
     });
-    let f = [0, 1, 2].map(|c| single[c] + multi[c]);
+    Estimate {
+        f: [0, 1, 2].map(|c| single[c] + multi[c]),
+        single,
+        multi,
+        stderr,
+    }
+}
+
+/// The direction pairs of a `--pairs` file, each direction normalised and above the surface.
+fn read_pairs(path: &Path) -> Result<Vec<(Vec3<f64>, Vec3<f64>)>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let pairs: Vec<[[f64; 3]; 2]> = serde_json::from_str(&text).map_err(|e| {
+        Error::invalid(
+            path,
+            "pairs",
+            format!("{e}; expected [[[wi_x, wi_y, wi_z], [wo_x, wo_y, wo_z]], ...]"),
+        )
+    })?;
+    pairs
+        .iter()
+        .enumerate()
+        .map(|(k, [wi, wo])| {
+            let direction = |name: &str, w: &[f64; 3]| {
+                unit_direction(w).map_err(|msg| Error::invalid(path, format!("[{k}].{name}"), msg))
+            };
+            Ok((direction("wi", wi)?, direction("wo", wo)?))
+        })
+        .collect()
+}
+
+/// Evaluate `f(wi, wo)` at one pair (`--wi`, `--wo`) or at every pair of a `--pairs` file.
+pub fn run_brdf(args: &BrdfArgs) -> Result<()> {
+    let material = args.material.material()?;
+    let pairs = match (&args.pairs, &args.wi, &args.wo) {
+        (Some(path), _, _) => read_pairs(path)?,
+        (None, Some(wi), Some(wo)) => {
+            vec![(parse_direction("--wi", wi)?, parse_direction("--wo", wo)?)]
+        }
+        _ => {
+            return Err(Error::argument(
+                "--wi",
+                "give --wi and --wo, or --pairs FILE",
+            ))
+        }
+    };
+    if args.samples == 0 {
+        return Err(Error::argument("--samples", "must be at least 1"));
+    }
+    let brdf = material.brdf();
+    let start = Instant::now();
+    let n = if brdf.is_stochastic() {
+        args.samples
+    } else {
+        1
+    };
+    let mut rng = rng_stream(args.seed, 0);
+    let estimates: Vec<Estimate> = pairs
+        .iter()
+        .map(|&(wi, wo)| estimate(brdf.as_ref(), wi, wo, n, &mut rng))
+        .collect();
     let seconds = start.elapsed().as_secs_f64();
     let mut out = json!({
         "model": material.model.name(), "ndf": material.ndf.name(), "height": material.height.name(),
-        "alpha": material.alpha, "wi": wi.re(), "wo": wo.re(),
-        "f": f, "f_cos": f.map(|v| v * wo.z), "f_single": single, "f_multi": multi,
-        "stderr": stderr, "samples": n, "seconds": seconds,
+        "alpha": material.alpha, "samples": n, "seconds": seconds,
     });
+    let column = |field: fn(&Estimate) -> [f64; 3]| estimates.iter().map(field).collect::<Vec<_>>();
+    if args.pairs.is_some() {
+        out["pairs"] = json!(pairs.len());
+        out["f"] = json!(column(|e| e.f));
+        out["f_single"] = json!(column(|e| e.single));
+        out["f_multi"] = json!(column(|e| e.multi));
+        out["stderr"] = json!(column(|e| e.stderr));
+    } else {
+        let ((wi, wo), e) = (pairs[0], &estimates[0]);
+        out["wi"] = json!(wi.re());
+        out["wo"] = json!(wo.re());
+        out["f"] = json!(e.f);
+        out["f_cos"] = json!(e.f.map(|v| v * wo.z));
+        out["f_single"] = json!(e.single);
+        out["f_multi"] = json!(e.multi);
+        out["stderr"] = json!(e.stderr);
+    }
     add_fallback_rate(&mut out, brdf.as_ref());
-    print_result(args.json, &out, || {
+    print_result(args.json || args.pairs.is_some(), &out, || {
+        let Estimate {
+            f,
+            single,
+            multi,
+            stderr,
+        } = &estimates[0];
         format!("f = {:.6e} {:.6e} {:.6e} 1/sr (single {:.6e} {:.6e} {:.6e}, multi {:.6e} {:.6e} {:.6e} +- {:.1e})", f[0], f[1], f[2], single[0], single[1], single[2], multi[0], multi[1], multi[2], stderr.iter().cloned().fold(0.0, f64::max))
     });
     Ok(())

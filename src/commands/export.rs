@@ -6,9 +6,14 @@
 //! (resolved against the working directory, then against the fit file's folder), else from the
 //! default flash setup; the scene's comment says which and why. The output is written
 //! atomically and replaces an existing file only with `--force`.
+//!
+//! `--format mitsuba --scene CAPTURE -o FOLDER` writes the whole capture instead: one complete
+//! scene `<photo stem>.xml` per photo (each photo has its own camera and light, and a Mitsuba
+//! scene lights every sensor with every emitter), so `mitsuba FOLDER/00.xml` re-renders photo
+//! `00` with the fitted material.
 
-use super::inputs::load_material;
-use super::output::check_output_file;
+use super::inputs::{load_material, open_capture};
+use super::output::{check_output_file, StagedFolder};
 use crate::capture::atomic_file::write_atomically;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
@@ -24,9 +29,13 @@ pub struct ExportArgs {
     /// json | mitsuba | gltf | materialx
     #[arg(long)]
     pub format: String,
-    /// File to write.
+    /// File to write (with --scene: a folder).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Photo set whose every photo becomes a Mitsuba scene `<stem>.xml` in the output folder
+    /// (--format mitsuba only).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
     /// Replace an existing output file.
     #[arg(long)]
     pub force: bool,
@@ -39,6 +48,15 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
             format!("{msg}, exporting {}", args.input.display()),
         )
     })?;
+    if let Some(capture) = &args.scene {
+        if format != ExportFormat::Mitsuba {
+            return Err(Error::argument(
+                "--scene",
+                format!("needs --format mitsuba, got --format {}", args.format),
+            ));
+        }
+        return export_scenes(args, capture);
+    }
     check_output_file(&args.output, args.force)?;
     let material = load_material(&args.input)?;
     let conversion = Conversion::new(&material);
@@ -58,6 +76,42 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
         }
     }
     println!("wrote {}", args.output.display());
+    Ok(())
+}
+
+/// `--scene`: one Mitsuba scene per photo of `capture_path` in the output folder.
+fn export_scenes(args: &ExportArgs, capture_path: &Path) -> Result<()> {
+    let material = load_material(&args.input)?;
+    let capture = open_capture(capture_path)?;
+    if capture.photos.is_empty() {
+        return Err(Error::invalid(
+            capture_path,
+            "photo",
+            "the capture has no photos",
+        ));
+    }
+    let conversion = Conversion::new(&material);
+    let folder = StagedFolder::new(&args.output, args.force)?;
+    let named = capture_path.display().to_string();
+    for (index, photo) in capture.photos.iter().enumerate() {
+        let scene = Scene::of_photo(&capture, &named, index)
+            .expect("every photo index of the capture has a scene");
+        let path = folder.path(&format!("{}.xml", photo.stem()));
+        let text = mitsuba::document(&conversion, &scene);
+        write_atomically(&path, |w| {
+            w.write_all(text.as_bytes())
+                .map_err(|e| Error::io(&path, e))
+        })?;
+    }
+    folder.commit()?;
+    if let Some(energy) = conversion.energy() {
+        eprintln!("note: {}", energy.note(material.model));
+    }
+    println!(
+        "wrote {} Mitsuba scenes to {}",
+        capture.photos.len(),
+        args.output.display()
+    );
     Ok(())
 }
 

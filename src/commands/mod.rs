@@ -6,10 +6,12 @@ pub mod brdf;
 pub mod compare;
 pub mod export;
 pub mod fit;
+pub mod image;
 pub mod images;
 pub mod inputs;
 pub mod lobe;
 pub mod output;
+pub mod records;
 pub mod stress;
 pub mod synth;
 
@@ -83,22 +85,21 @@ pub fn parse_direction(flag: &str, text: &str) -> Result<Vec3<f64>> {
     let [x, y, z] = v[..] else {
         return Err(Error::argument(flag, format!("'{text}' is not X,Y,Z")));
     };
-    let w = Vec3::new(x, y, z);
+    unit_direction(&[x, y, z]).map_err(|msg| Error::argument(flag, format!("'{text}' {msg}")))
+}
+
+/// `[x, y, z]` normalised, if it is a direction above the surface; else what is wrong with it.
+pub fn unit_direction(xyz: &[f64; 3]) -> std::result::Result<Vec3<f64>, String> {
+    let w = Vec3::new(xyz[0], xyz[1], xyz[2]);
     let len = w.length();
     if !len.is_finite() || len == 0.0 {
-        return Err(Error::argument(
-            flag,
-            format!("'{text}' is not a direction (zero or non-finite length)"),
-        ));
+        return Err("is not a direction (zero or non-finite length)".to_string());
     }
     let w = w * (1.0 / len);
     if w.z <= 0.0 {
-        return Err(Error::argument(
-            flag,
-            format!(
-                "'{text}' points below or along the surface (z <= 0); reflection models need z > 0"
-            ),
-        ));
+        return Err(
+            "points below or along the surface (z <= 0); reflection models need z > 0".to_string(),
+        );
     }
     Ok(w)
 }

@@ -13,15 +13,26 @@
 //! | multi-bounce models | the same roughconductor: Mitsuba 3 has no multiple-scattering conductor | no, the missing energy is stated |
 //! | `diffuse` | `blendbsdf` with weight 0.5 of the roughconductor and a `diffuse`, both with reflectance doubled, so the sum is `f_spec + diffuse / pi` | yes (RGB variants; spectral variants may clamp reflectances above 1) |
 //!
-//! The scene: the sample is a `rectangle` scaled to the capture's sample (capture units), the
-//! camera and light are those of the first photo of the capture the fit file names, else a
-//! default flash setup ([`Scene::default_flash`]). A pinhole camera keeps position, look-at, up
-//! and vertical field of view (a principal point off centre and `fx != fy` are not kept); a
-//! rectified camera becomes a perspective camera at its position looking at the sample centre
-//! and framing the sample's height. A flash is a point light at the camera.
+//! The scene: the sample is a `rectangle` scaled to the capture's sample (capture units); the
+//! camera and light are those of one photo of a capture (the first photo of the capture the fit
+//! file names, or, with `export --scene`, every photo in turn: one scene per photo, since each
+//! photo has its own light), else a default flash setup ([`Scene::default_flash`]).
+//!
+//! | capture | written | exact? |
+//! | --- | --- | --- |
+//! | pinhole camera | `perspective` with `to_world` look-at (position, look-at, up), `fov` from `fy` on the y axis, `principal_point_offset_x = (W/2 - cx) / W`, `principal_point_offset_y = (H/2 - cy) / H` | yes when `fx = fy` (Mitsuba's pixels are square); otherwise stated |
+//! | rectified camera at `P` | `perspective` at `P` looking straight down (`up` = +y), `fov` such that the film spans the sample's height at depth `P.z`, principal point offsets `-P.x / width`, `P.y / height`: the image plane is parallel to the sample, so the plane maps affinely onto the film exactly as the rectified image does, and every pixel sees its point from `P` | yes when the film's aspect equals the sample's; otherwise stated |
+//! | pixel footprint | `box` reconstruction filter (the tool averages stratified samples over each pixel) | yes |
+//! | point light / flash | `point` emitter at the light (flash: at the camera) with `intensity x exposure` | yes |
+//! | directional light | `directional` emitter with `irradiance x exposure` | yes |
+//! | integrator | `direct` (the tool renders direct lighting only) | yes |
+//!
+//! Mitsuba 3's principal point offsets are fractions of the film size: a positive x offset turns
+//! the ray through the film centre to image right, a positive y offset to image down (measured
+//! with `Sensor::sample_ray`, mitsuba 3.9).
 
 use super::{number, triple, xml_comment, Conversion};
-use crate::capture::{Camera, Capture, Light};
+use crate::capture::{Camera, Capture, Light, Pinhole, Rectified};
 use crate::material::FresnelSpec;
 use crate::microfacet::Height;
 use glam::DVec3;
@@ -36,6 +47,10 @@ pub struct Scene {
     pub camera: SceneCamera,
     /// The photo's light; a flash sits at the camera's origin.
     pub light: Light,
+    /// The photo's exposure, which scales the light.
+    pub exposure: f64,
+    /// Approximations of the camera, one sentence each (empty when exact).
+    pub notes: Vec<String>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -44,31 +59,26 @@ pub struct SceneCamera {
     pub target: DVec3,
     pub up: DVec3,
     pub fov_y_deg: f64,
+    /// Mitsuba's `principal_point_offset_x`, `_y`: fractions of the film width and height.
+    pub principal_point_offset: [f64; 2],
     pub resolution: [usize; 2],
 }
 
 impl Scene {
     /// The camera and light of the capture's first photo; `None` for a capture without photos.
     pub fn from_capture(capture: &Capture, path: &str) -> Option<Scene> {
-        let photo = capture.photos.first()?;
-        let camera = match &photo.camera {
-            Camera::Pinhole(c) => SceneCamera {
-                origin: c.position,
-                target: c.look_at,
-                up: c.up,
-                fov_y_deg: 2.0 * (c.resolution[1] as f64 / 2.0 / c.fy).atan().to_degrees(),
-                resolution: c.resolution,
-            },
-            Camera::Rectified(c) => SceneCamera {
-                origin: c.position,
-                target: DVec3::ZERO,
-                up: DVec3::Y,
-                fov_y_deg: 2.0
-                    * (capture.sample.height / 2.0 / c.position.length())
-                        .atan()
-                        .to_degrees(),
-                resolution: c.resolution,
-            },
+        Scene::of_photo(capture, path, 0)
+    }
+
+    /// The camera, light and exposure of photo `index` of `capture` (read from `path`); `None`
+    /// when there is no such photo.
+    pub fn of_photo(capture: &Capture, path: &str, index: usize) -> Option<Scene> {
+        let photo = capture.photos.get(index)?;
+        let (camera, notes) = match &photo.camera {
+            Camera::Pinhole(c) => pinhole_camera(c),
+            Camera::Rectified(c) => {
+                rectified_camera(c, capture.sample.width, capture.sample.height)
+            }
         };
         Some(Scene {
             source: format!(
@@ -79,6 +89,8 @@ impl Scene {
             sample: [capture.sample.width, capture.sample.height],
             camera,
             light: photo.light.clone(),
+            exposure: photo.exposure,
+            notes,
         })
     }
 
@@ -94,13 +106,69 @@ impl Scene {
                 target: DVec3::ZERO,
                 up: DVec3::Y,
                 fov_y_deg: 30.0,
+                principal_point_offset: [0.0; 2],
                 resolution: [128, 128],
             },
             light: Light::Flash {
                 intensity: [1000.0; 3],
             },
+            exposure: 1.0,
+            notes: Vec::new(),
         }
     }
+}
+
+/// Relative difference above which two lengths that should match are reported as not matching.
+const MISMATCH: f64 = 1e-9;
+
+/// The perspective sensor of a pinhole camera (module table), with a note when `fx != fy`.
+fn pinhole_camera(c: &Pinhole) -> (SceneCamera, Vec<String>) {
+    let [width, height] = c.resolution.map(|n| n as f64);
+    let mut notes = Vec::new();
+    if (c.fx - c.fy).abs() > MISMATCH * c.fy {
+        notes.push(format!(
+            "the camera's fx {} differs from fy {}; Mitsuba's pixels are square, so the image \
+             is stretched horizontally by {}",
+            number(c.fx),
+            number(c.fy),
+            number(c.fy / c.fx)
+        ));
+    }
+    let camera = SceneCamera {
+        origin: c.position,
+        target: c.look_at,
+        up: c.up,
+        fov_y_deg: 2.0 * (height / 2.0 / c.fy).atan().to_degrees(),
+        principal_point_offset: [(width / 2.0 - c.cx) / width, (height / 2.0 - c.cy) / height],
+        resolution: c.resolution,
+    };
+    (camera, notes)
+}
+
+/// The perspective sensor that sees exactly a rectified image (module table), with a note when
+/// the film's aspect differs from the sample's.
+fn rectified_camera(c: &Rectified, width: f64, height: f64) -> (SceneCamera, Vec<String>) {
+    let [columns, rows] = c.resolution.map(|n| n as f64);
+    let mut notes = Vec::new();
+    let (film_aspect, sample_aspect) = (columns / rows, width / height);
+    if (film_aspect - sample_aspect).abs() > MISMATCH * sample_aspect {
+        notes.push(format!(
+            "the rectified image's aspect {} differs from the sample's {}; Mitsuba's pixels are \
+             square, so the film spans the sample's height but not exactly its width",
+            number(film_aspect),
+            number(sample_aspect)
+        ));
+    }
+    let p = c.position;
+    let camera = SceneCamera {
+        origin: p,
+        target: p - DVec3::Z,
+        up: DVec3::Y,
+        fov_y_deg: 2.0 * (height / 2.0 / p.z).atan().to_degrees(),
+        principal_point_offset: [-p.x / width, p.y / height],
+        resolution: c.resolution,
+    };
+    (camera, notes)
 }
 
 fn xyz(v: DVec3) -> String {
@@ -209,6 +277,8 @@ fn sensor(camera: &SceneCamera) -> String {
         "    <sensor type=\"perspective\">
         <float name=\"fov\" value=\"{}\"/>
         <string name=\"fov_axis\" value=\"y\"/>
+        <float name=\"principal_point_offset_x\" value=\"{}\"/>
+        <float name=\"principal_point_offset_y\" value=\"{}\"/>
         <transform name=\"to_world\">
             <lookat origin=\"{}\" target=\"{}\" up=\"{}\"/>
         </transform>
@@ -219,10 +289,13 @@ fn sensor(camera: &SceneCamera) -> String {
             <integer name=\"width\" value=\"{}\"/>
             <integer name=\"height\" value=\"{}\"/>
             <string name=\"pixel_format\" value=\"rgb\"/>
+            <rfilter type=\"box\"/>
         </film>
     </sensor>
 ",
         number(camera.fov_y_deg),
+        number(camera.principal_point_offset[0]),
+        number(camera.principal_point_offset[1]),
         xyz(camera.origin),
         xyz(camera.target),
         xyz(camera.up),
@@ -231,27 +304,29 @@ fn sensor(camera: &SceneCamera) -> String {
     )
 }
 
-fn emitter(light: &Light, camera: &SceneCamera) -> String {
+/// The emitter of `scene`'s light, its power scaled by the photo's exposure.
+fn emitter(scene: &Scene) -> String {
+    let scaled = |power: [f64; 3]| power.map(|v| v * scene.exposure);
     let point = |position: DVec3, intensity: [f64; 3]| {
         format!(
             "    <emitter type=\"point\">\n        <point name=\"position\" {}/>\n        <rgb name=\"intensity\" value=\"{}\"/>\n    </emitter>\n",
             xyz_attributes(position),
-            triple(intensity)
+            triple(scaled(intensity))
         )
     };
-    match *light {
+    match scene.light {
         Light::Point {
             position,
             intensity,
         } => point(position, intensity),
-        Light::Flash { intensity } => point(camera.origin, intensity),
+        Light::Flash { intensity } => point(scene.camera.origin, intensity),
         Light::Directional {
             direction,
             irradiance,
         } => format!(
             "    <emitter type=\"directional\">\n        <vector name=\"direction\" {}/>\n        <rgb name=\"irradiance\" value=\"{}\"/>\n    </emitter>\n",
             xyz_attributes(-direction),
-            triple(irradiance)
+            triple(scaled(irradiance))
         ),
     }
 }
@@ -270,7 +345,16 @@ pub fn document(conversion: &Conversion, scene: &Scene) -> String {
     xml += "<scene version=\"3.0.0\">\n";
     xml += "    <integrator type=\"direct\"/>\n";
     xml += &xml_comment("    ", &format!("scene: {}", scene.source));
-    for note in notes(conversion) {
+    if scene.exposure != 1.0 {
+        xml += &xml_comment(
+            "    ",
+            &format!(
+                "the light's power is multiplied by the photo's exposure {}",
+                number(scene.exposure)
+            ),
+        );
+    }
+    for note in scene.notes.iter().cloned().chain(notes(conversion)) {
         xml += &xml_comment("    ", &note);
     }
     xml += &bsdf(conversion);
@@ -280,6 +364,6 @@ pub fn document(conversion: &Conversion, scene: &Scene) -> String {
         number(scene.sample[1] / 2.0)
     );
     xml += &sensor(&scene.camera);
-    xml += &emitter(&scene.light, &scene.camera);
+    xml += &emitter(scene);
     xml + "</scene>\n"
 }

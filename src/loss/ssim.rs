@@ -53,6 +53,12 @@ fn blur_lines(
     out
 }
 
+/// The window blur of a `[width, height]` image (row-major), zero outside the image: the
+/// local mean of every SSIM statistic (exposed for `bouncefit image blur`).
+pub fn gaussian_blur(image: &[f64], size: [usize; 2]) -> Vec<f64> {
+    blur(image, size, &window())
+}
+
 /// Separable blur with the window, zero outside the image (a symmetric linear map).
 fn blur(image: &[f64], [width, height]: [usize; 2], g: &[f64]) -> Vec<f64> {
     let rows = blur_lines(image, g, width, height, 1, width);
@@ -196,6 +202,24 @@ fn channel_maps(
     ChannelMaps::new(x, y, w, size, range)
 }
 
+/// Each loss pixel's SSIM per channel (0 where the weight is 0).
+pub fn similarity(
+    layout: &ImageLayout,
+    predicted: &[[f64; 3]],
+    target: &[[f64; 3]],
+    weight: &[f64],
+) -> Vec<[f64; 3]> {
+    let mut out = vec![[0.0; 3]; predicted.len()];
+    for (photo, pixels) in pixels_by_photo(layout).iter().enumerate() {
+        let maps = [0, 1, 2]
+            .map(|c| channel_maps(layout.sizes[photo], pixels, c, predicted, target, weight));
+        for &(k, o) in pixels {
+            out[k] = [0, 1, 2].map(|c| maps[c].s[o]);
+        }
+    }
+    out
+}
+
 /// Each loss pixel's `w sum_c (1 - S_c)`.
 pub fn terms(
     layout: &ImageLayout,
@@ -203,16 +227,11 @@ pub fn terms(
     target: &[[f64; 3]],
     weight: &[f64],
 ) -> Vec<f64> {
-    let mut out = vec![0.0; predicted.len()];
-    for (photo, pixels) in pixels_by_photo(layout).iter().enumerate() {
-        for c in 0..3 {
-            let maps = channel_maps(layout.sizes[photo], pixels, c, predicted, target, weight);
-            for &(k, o) in pixels {
-                out[k] += weight[k] * (1.0 - maps.s[o]);
-            }
-        }
-    }
-    out
+    similarity(layout, predicted, target, weight)
+        .iter()
+        .zip(weight)
+        .map(|(s, w)| w * s.iter().map(|s| 1.0 - s).sum::<f64>())
+        .collect()
 }
 
 /// `d (sum of terms) / d predicted` per loss pixel and channel.
