@@ -14,7 +14,6 @@ use super::projection::Projection;
 use crate::albedo::rng_stream;
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::fresnel::ior_from_reflectivity_edge_tint;
-use crate::render::render_pixels;
 use argmin::core::{CostFunction, Error as ArgminError, Executor, State};
 use argmin::solver::brent::BrentOpt;
 use argmin::solver::neldermead::NelderMead;
@@ -100,7 +99,7 @@ pub fn scan_start(objective: &Objective) -> Material {
             fresnel: FresnelSpec::White,
             diffuse: [0.0; 3],
         };
-        let predicted = render_pixels(&probe, records, pixels, objective.seed());
+        let predicted = objective.render(&probe, objective.seed());
         let mut err = 0.0;
         let mut scale = [0.0; 3];
         for c in 0..3 {
