@@ -123,10 +123,21 @@ fn quick_json_has_the_contract_fields_and_consistent_values() {
         (
             count("render", false),
             count("render", true),
+            count("fit", false),
             count("fit", true)
         ),
-        (2, 2, 2)
+        (2, 2, 2, 2)
     );
+    // Skipping rows carry their render plan; single has no multiple-bounce term to skip, so
+    // its skipping render is the exact one.
+    for j in jobs {
+        assert_eq!(j["skip"].as_bool().unwrap(), !j["plan"].is_null(), "{j}");
+    }
+    let single_render = jobs
+        .iter()
+        .find(|j| j["job"] == "render" && j["model"] == "single" && j["skip"] == true)
+        .unwrap();
+    assert_eq!(single_render["rel_error_vs_exact"].as_f64(), Some(0.0));
     for j in jobs {
         for key in ["job", "model", "skip", "seconds", "loss", "alpha_rel_error"] {
             assert!(j.get(key).is_some(), "missing {key} in {j}");

@@ -176,7 +176,7 @@ impl<'a> Objective<'a> {
     }
 
     /// Predicted radiance of the loss pixels for `material`, rendered through the plan.
-    fn render(&self, material: &crate::material::Material, seed: u64) -> Vec<[f64; 3]> {
+    pub fn render(&self, material: &crate::material::Material, seed: u64) -> Vec<[f64; 3]> {
         render_material(material, self.records, &self.pixels, self.plan(), seed)
     }
 

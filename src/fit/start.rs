@@ -14,7 +14,6 @@ use super::projection::Projection;
 use crate::albedo::rng_stream;
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::fresnel::ior_from_reflectivity_edge_tint;
-use crate::render::render_pixels;
 use argmin::core::{CostFunction, Error as ArgminError, Executor, State};
 use argmin::solver::brent::BrentOpt;
 use argmin::solver::neldermead::NelderMead;
@@ -107,7 +106,7 @@ pub fn scan_start(objective: &Objective) -> (Material, f64) {
             fresnel: space.known_fresnel.unwrap_or(FresnelSpec::White),
             diffuse: [0.0; 3],
         };
-        let predicted = render_pixels(&probe, records, pixels, objective.seed());
+        let predicted = objective.render(&probe, objective.seed());
         let mut sums = [[0.0; 3]; 3];
         for (c, [pt, pp, tt]) in sums.iter_mut().enumerate() {
             for (k, &p) in pixels.iter().enumerate() {
