@@ -79,7 +79,7 @@ pub fn render_planned<T: Real, B: ScalarBrdf<T> + ?Sized>(
     let spp = records.samples_per_pixel;
     match (plan.multi_term(single), &plan.repeated) {
         (MultiTerm::Exact, None) => render_model(brdf, diffuse, records, pixels, seed),
-        (MultiTerm::Skipped, None) => render_model(single, diffuse, records, pixels, seed),
+        (MultiTerm::Skipped, _) => render_model(single, diffuse, records, pixels, seed),
         (MultiTerm::Exact, Some(repeated)) => {
             let values = shared_values(repeated, seed, |s, rng| {
                 let (wi, wo) = at(s);
@@ -89,16 +89,7 @@ pub fn render_planned<T: Real, B: ScalarBrdf<T> + ?Sized>(
                 values[repeated.pair_of[k * spp + s % spp] as usize]
             })
         }
-        (MultiTerm::Skipped, Some(repeated)) => {
-            let values = shared_values(repeated, seed, |s, _| {
-                let (wi, wo) = at(s);
-                single.eval(wi, wo)
-            });
-            accumulate(records, pixels, diffuse, seed, |k, s, _| {
-                values[repeated.pair_of[k * spp + s % spp] as usize]
-            })
-        }
-        (MultiTerm::Sparse(anchors), repeated) => {
+        (MultiTerm::Sparse(anchors), _) => {
             let draws = if plan.stochastic { spp } else { 1 };
             let multi: Vec<Rgb<T>> = anchors
                 .points
@@ -113,27 +104,14 @@ pub fn render_planned<T: Real, B: ScalarBrdf<T> + ?Sized>(
                     sum.scale(T::c(1.0 / draws as f64))
                 })
                 .collect();
-            let singles = repeated.as_ref().map(|repeated| {
-                shared_values(repeated, seed, |s, _| {
-                    let (wi, wo) = at(s);
-                    single.eval(wi, wo)
-                })
-            });
             accumulate(records, pixels, diffuse, seed, |k, s, rng| {
-                let Some(corners) = &anchors.corners[k] else {
-                    let (wi, wo) = at(s);
-                    return brdf.eval_total(wi, wo, rng);
-                };
-                let single_value = match (&singles, repeated) {
-                    (Some(values), Some(repeated)) => {
-                        values[repeated.pair_of[k * spp + s % spp] as usize]
+                let (wi, wo) = at(s);
+                match &anchors.corners[k] {
+                    Some(corners) => {
+                        single.eval(wi, wo) + anchors::Anchors::interpolate(corners, &multi)
                     }
-                    _ => {
-                        let (wi, wo) = at(s);
-                        single.eval(wi, wo)
-                    }
-                };
-                single_value + anchors::Anchors::interpolate(corners, &multi)
+                    None => brdf.eval_total(wi, wo, rng),
+                }
             })
         }
     }
