@@ -237,10 +237,9 @@ pub fn fit_job(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::params::{FresnelFamily, ParamSpace};
+    use crate::fit::params::ParamSpace;
     use crate::fit::Optimizer;
     use crate::loss::LossKind;
-    use crate::microfacet::{Height, NdfKind};
 
     fn repo(path: &str) -> std::path::PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
@@ -284,16 +283,7 @@ mod tests {
         assert_eq!(records.photos[0].width, 16);
         let truth = truth.expect("the bundled set names its material");
         let options = FitOptions {
-            space: ParamSpace {
-                model: Model::Single,
-                ndf: NdfKind::Ggx,
-                height: Height::Correlated,
-                anisotropic: false,
-                fresnel: FresnelFamily::Schlick,
-                diffuse: false,
-                known_fresnel: None,
-                exposure: false,
-            },
+            space: ParamSpace::plain(Model::Single),
             optimizer: Optimizer::Auto,
             loss: LossKind::L2,
             gradient: Default::default(),

@@ -84,6 +84,21 @@ pub struct Surface<T> {
 }
 
 impl ParamSpace {
+    /// The simplest space of `model`: GGX, correlated heights, isotropic roughness, Schlick F0,
+    /// no diffuse, no known Fresnel, no exposure (the `fit` defaults).
+    pub fn plain(model: Model) -> ParamSpace {
+        ParamSpace {
+            model,
+            ndf: NdfKind::Ggx,
+            height: Height::Correlated,
+            anisotropic: false,
+            fresnel: FresnelFamily::Schlick,
+            diffuse: false,
+            known_fresnel: None,
+            exposure: false,
+        }
+    }
+
     pub fn dim(&self) -> usize {
         let alpha = if self.anisotropic { 2 } else { 1 };
         let fresnel = match (self.known_fresnel, self.fresnel) {
@@ -260,14 +275,12 @@ mod tests {
             (true, FresnelFamily::Schlick, true, Some(copper), true),
         ] {
             let space = ParamSpace {
-                model: Model::Single,
-                ndf: NdfKind::Ggx,
-                height: Height::Correlated,
                 anisotropic,
                 fresnel,
                 diffuse,
                 known_fresnel,
                 exposure,
+                ..ParamSpace::plain(Model::Single)
             };
             space.check().unwrap();
             let x: Vec<f64> = (0..space.dim()).map(|i| 0.3 * i as f64 - 1.0).collect();
@@ -289,14 +302,8 @@ mod tests {
     #[test]
     fn exposure_with_a_searched_fresnel_is_refused() {
         let space = ParamSpace {
-            model: Model::Single,
-            ndf: NdfKind::Ggx,
-            height: Height::Correlated,
-            anisotropic: false,
-            fresnel: FresnelFamily::Schlick,
-            diffuse: false,
-            known_fresnel: None,
             exposure: true,
+            ..ParamSpace::plain(Model::Single)
         };
         assert!(space.check().unwrap_err().contains("--fresnel-known"));
     }

@@ -310,19 +310,12 @@ mod tests {
     use crate::bsdf::Model;
     use crate::fit::log_posterior::Reading;
     use crate::fit::params::logit;
-    use crate::microfacet::{Height, NdfKind};
 
     #[test]
     fn diffuse_choice_is_pooled_by_model_name_and_reported_as_a_probability() {
         let space = |model, diffuse| ParamSpace {
-            model,
-            ndf: NdfKind::Ggx,
-            height: Height::Correlated,
-            anisotropic: false,
-            fresnel: FresnelFamily::Schlick,
             diffuse,
-            known_fresnel: None,
-            exposure: false,
+            ..ParamSpace::plain(model)
         };
         let spaces = [
             space(Model::Single, false),

@@ -100,14 +100,11 @@ fn check_model(model: Model) {
             (FresnelFamily::Conductor, true),
         ] {
             let space = ParamSpace {
-                model,
                 ndf,
-                height: Height::Correlated,
                 anisotropic,
                 fresnel,
                 diffuse: true,
-                known_fresnel: None,
-                exposure: false,
+                ..ParamSpace::plain(model)
             };
             let truth = space.material(&random_point(&space, &mut rng));
             let records = synthetic_records(&truth);
@@ -154,16 +151,7 @@ fn turquin_exact_gradient_matches_finite_differences() {
 
 #[test]
 fn heitz_falls_back_to_finite_differences() {
-    let space = ParamSpace {
-        model: Model::Heitz,
-        ndf: NdfKind::Ggx,
-        height: Height::Correlated,
-        anisotropic: false,
-        fresnel: FresnelFamily::Schlick,
-        diffuse: false,
-        known_fresnel: None,
-        exposure: false,
-    };
+    let space = ParamSpace::plain(Model::Heitz);
     let records = ShadingRecords::default();
     let objective = Objective::new(space, &records, LossKind::L2, 0);
     assert_eq!(objective.gradient_method(), GradientMethod::Fd);
@@ -246,14 +234,10 @@ fn check_pathwise(model: Model) {
     for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
         for fresnel in [FresnelFamily::Schlick, FresnelFamily::Conductor] {
             let space = ParamSpace {
-                model,
                 ndf,
-                height: Height::Correlated,
-                anisotropic: false,
                 fresnel,
                 diffuse: true,
-                known_fresnel: None,
-                exposure: false,
+                ..ParamSpace::plain(model)
             };
             let truth = space.material(&random_point(&space, &mut rng));
             let records = synthetic_records(&truth);
