@@ -19,7 +19,10 @@ use super::params::ParamSpace;
 use crate::bsdf::differentiable;
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::plan::{PlanSummary, RenderPlan, Skips};
-use crate::render::{render_material, render_planned};
+use crate::render::{
+    render_material, render_material_streams, render_planned_split, render_planned_streams,
+    SplitRender,
+};
 use crate::scalar::Real;
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
@@ -143,6 +146,12 @@ impl<'a> Objective<'a> {
         &self.seeds
     }
 
+    /// Whether the model's value is a Monte Carlo estimate (the objective then has small jumps
+    /// where a walk changes its path).
+    pub fn is_stochastic(&self) -> bool {
+        self.stochastic
+    }
+
     /// Whether the loss compares two renders (a stochastic model).
     pub fn is_paired(&self) -> bool {
         self.seeds.len() == 2
@@ -241,10 +250,43 @@ impl<'a> Objective<'a> {
     pub fn renders(&self, x: &[f64]) -> Vec<Vec<[f64; 3]>> {
         let material = self.space.material(x);
         let exposure = self.space.exposure(x);
-        self.seeds
-            .iter()
-            .map(|&seed| self.exposed(self.render(&material, seed), exposure))
-            .collect()
+        render_material_streams(
+            &material,
+            self.records,
+            &self.pixels,
+            self.plan(),
+            &self.seeds,
+        )
+        .into_iter()
+        .map(|render| self.exposed(render, exposure))
+        .collect()
+    }
+
+    /// [`Objective::renders`] at `x` split as [`render_planned_split`] splits them (the shared
+    /// part only when `shared`), or `None` when the plan does not interpolate at this roughness.
+    pub fn render_split(&self, x: &[f64], shared: bool) -> Option<SplitRender<f64>> {
+        let material = self.space.material(x);
+        let exposure = self.space.exposure(x);
+        let brdf = material.brdf();
+        let single = material.single::<f64>();
+        let diffuse = shared.then_some(material.diffuse);
+        let split = render_planned_split(
+            brdf.as_ref(),
+            &single,
+            diffuse,
+            self.records,
+            &self.pixels,
+            self.plan(),
+            &self.seeds,
+        )?;
+        Some(SplitRender {
+            shared: split.shared.map(|r| self.exposed(r, exposure)),
+            own: split
+                .own
+                .into_iter()
+                .map(|r| self.exposed(r, exposure))
+                .collect(),
+        })
     }
 
     /// The loss bound to this objective's pixels.
@@ -324,22 +366,18 @@ impl<'a> Objective<'a> {
             .collect();
         let surface = self.space.surface(&coords);
         let brdf = differentiable(self.space.model, surface.single)?;
-        let renders: Vec<Vec<[DualSVec64<N>; 3]>> = self
-            .seeds
-            .iter()
-            .map(|&seed| {
-                let render = render_planned(
-                    brdf.as_ref(),
-                    &surface.single,
-                    surface.diffuse,
-                    self.records,
-                    &self.pixels,
-                    self.plan(),
-                    seed,
-                );
-                self.exposed(render, surface.exposure)
-            })
-            .collect();
+        let renders: Vec<Vec<[DualSVec64<N>; 3]>> = render_planned_streams(
+            brdf.as_ref(),
+            &surface.single,
+            surface.diffuse,
+            self.records,
+            &self.pixels,
+            self.plan(),
+            &self.seeds,
+        )
+        .into_iter()
+        .map(|render| self.exposed(render, surface.exposure))
+        .collect();
         let values: Vec<Vec<[f64; 3]>> = renders
             .iter()
             .map(|r| r.iter().map(|p| p.map(|v| v.re)).collect())

@@ -18,7 +18,7 @@
 use super::objective::Objective;
 use super::params::{logit, sigmoid, FresnelFamily};
 use crate::bsdf::Model;
-use crate::render::lambertian_pixels;
+use crate::render::{add_to, lambertian_pixels, SplitRender};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Degree in F0 of the prediction's polynomial model (see the module docs).
@@ -30,6 +30,9 @@ pub fn fresnel_degree(model: Model) -> usize {
     }
 }
 
+/// Most F0 nodes of any model: `fresnel_degree + 1`.
+const MAX_NODES: usize = 5;
+
 /// Grid of the F0 scan before golden-section refinement.
 const F0_SCAN: usize = 201;
 const GOLDEN_ITERATIONS: usize = 80;
@@ -39,6 +42,9 @@ pub struct Projection<'o, 'r> {
     objective: &'o Objective<'r>,
     /// F0 nodes (as the material sees them after the logit map).
     nodes: Vec<f64>,
+    /// Monomial coefficients of the Lagrange polynomial of each node (1 there, 0 at the
+    /// others): the columns of the inverse Vandermonde matrix of `nodes`.
+    lagrange: Vec<[f64; MAX_NODES]>,
     /// Per loss pixel and channel: weights `v` of the squared error.
     weights: Vec<[f64; 3]>,
     /// Per loss pixel: white Lambertian prediction, when the space fits a diffuse albedo.
@@ -154,7 +160,7 @@ impl<'o, 'r> Projection<'o, 'r> {
         }
         let weights = objective.image_loss().quadratic_weights()?;
         let degree = fresnel_degree(space.model);
-        let nodes = (0..=degree)
+        let nodes: Vec<f64> = (0..=degree)
             .map(|j| {
                 let chebyshev =
                     0.5 * (1.0 - (std::f64::consts::PI * j as f64 / degree as f64).cos());
@@ -166,12 +172,26 @@ impl<'o, 'r> Projection<'o, 'r> {
             .then(|| lambertian_pixels(objective.records(), objective.pixels()));
         Some(Projection {
             objective,
+            lagrange: (0..nodes.len())
+                .map(|i| {
+                    let unit: Vec<f64> = (0..nodes.len()).map(|j| f64::from(i == j)).collect();
+                    let mut column = [0.0; MAX_NODES];
+                    column[..nodes.len()].copy_from_slice(&monomial_coefficients(&nodes, &unit));
+                    column
+                })
+                .collect(),
             nodes,
             weights,
             diffuse,
             roughness_dim: if space.anisotropic { 2 } else { 1 },
             renders: AtomicUsize::new(0),
         })
+    }
+
+    /// Whether the projected loss is exact (a prediction polynomial in F0 of degree at most 2,
+    /// see the module table) rather than a polynomial approximation.
+    pub fn is_exact(&self) -> bool {
+        fresnel_degree(self.objective.space.model) <= 2
     }
 
     /// Renders made so far: the cost of the projected search in objective evaluations.
@@ -189,19 +209,58 @@ impl<'o, 'r> Projection<'o, 'r> {
         x
     }
 
+    /// The objective's renders at every F0 node, `[node][stream][pixel]`. Where the plan
+    /// interpolates the multiple-bounce term, the part every stream shares (exact single bounce,
+    /// affine in a Schlick F0) is rendered at the first and last node only and interpolated
+    /// linearly at the others; each node still renders its own multiple-bounce estimates.
+    fn node_renders(&self, roughness: &[f64]) -> Vec<Vec<Vec<[f64; 3]>>> {
+        let at = |f: f64| self.coordinates(roughness, [f; 3], [0.0; 3]);
+        let full = || {
+            self.nodes
+                .iter()
+                .map(|&f| self.objective.renders(&at(f)))
+                .collect()
+        };
+        let (first, last) = (self.nodes[0], self.nodes[self.nodes.len() - 1]);
+        let ends = (
+            self.objective.render_split(&at(first), true),
+            self.objective.render_split(&at(last), true),
+        );
+        let split = |s: Option<SplitRender<f64>>| s.and_then(|s| Some((s.shared?, s.own)));
+        let (Some((shared_first, own_first)), Some((shared_last, own_last))) =
+            (split(ends.0), split(ends.1))
+        else {
+            return full();
+        };
+        let (mut own_first, mut own_last) = (Some(own_first), Some(own_last));
+        let n = self.nodes.len();
+        let mut renders = Vec::with_capacity(n);
+        for (j, &f) in self.nodes.iter().enumerate() {
+            let own = match j {
+                0 => own_first.take(),
+                _ if j == n - 1 => own_last.take(),
+                _ => self.objective.render_split(&at(f), false).map(|s| s.own),
+            };
+            let Some(mut own) = own else {
+                return full();
+            };
+            let t = (f - first) / (last - first);
+            let shared: Vec<[f64; 3]> = shared_first
+                .iter()
+                .zip(&shared_last)
+                .map(|(a, b)| [0, 1, 2].map(|c| a[c] + t * (b[c] - a[c])))
+                .collect();
+            own.iter_mut().for_each(|r| add_to(r, &shared));
+            renders.push(own);
+        }
+        renders
+    }
+
     /// The loss minimised over F0 and diffuse at roughness coordinates `roughness`, and the
     /// full coordinates of that minimum.
     pub fn solve(&self, roughness: &[f64]) -> (f64, Vec<f64>) {
         self.renders.fetch_add(self.nodes.len(), Ordering::Relaxed);
-        // renders[node][stream][pixel]
-        let renders: Vec<Vec<Vec<[f64; 3]>>> = self
-            .nodes
-            .iter()
-            .map(|&f| {
-                self.objective
-                    .renders(&self.coordinates(roughness, [f; 3], [0.0; 3]))
-            })
-            .collect();
+        let renders = self.node_renders(roughness);
         let streams = renders[0].len();
         let target = self.objective.targets();
         let k = self.nodes.len();
@@ -220,13 +279,17 @@ impl<'o, 'r> Projection<'o, 'r> {
                 if v == 0.0 {
                     continue;
                 }
-                let coefficients: Vec<Vec<f64>> = (0..streams)
-                    .map(|s| {
-                        let values: Vec<f64> = renders.iter().map(|r| r[s][p][c]).collect();
-                        monomial_coefficients(&self.nodes, &values)
-                    })
-                    .collect();
-                let (a1, a2) = (&coefficients[0], &coefficients[streams - 1]);
+                // Monomial coefficients of the stream's polynomial: the node values times the
+                // inverse Vandermonde matrix.
+                let coefficients = |stream: usize| {
+                    let mut a = [0.0; MAX_NODES];
+                    for (lagrange, r) in self.lagrange.iter().zip(&renders) {
+                        let y = r[stream][p][c];
+                        a.iter_mut().zip(lagrange).for_each(|(a, l)| *a += l * y);
+                    }
+                    a
+                };
+                let (a1, a2) = (coefficients(0), coefficients(streams - 1));
                 let (t, d) = (target[p][c], self.diffuse.as_ref().map_or(0.0, |d| d[p][c]));
                 for j in 0..k {
                     let a = 0.5 * (a1[j] + a2[j]);

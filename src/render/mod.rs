@@ -90,20 +90,7 @@ pub fn render_planned<T: Real, B: ScalarBrdf<T> + ?Sized>(
             })
         }
         (MultiTerm::Sparse(anchors), _) => {
-            let draws = if plan.stochastic { spp } else { 1 };
-            let multi: Vec<Rgb<T>> = anchors
-                .points
-                .par_iter()
-                .map(|a| {
-                    let mut rng = rng_stream(seed ^ ANCHOR_STREAMS, a.pixel as u64);
-                    let (wi, wo) = (Vec3::from_f64(a.wi), Vec3::from_f64(a.wo));
-                    let mut sum = Rgb::splat(T::zero());
-                    for _ in 0..draws {
-                        sum = sum + brdf.eval_split(wi, wo, &mut rng).1;
-                    }
-                    sum.scale(T::c(1.0 / draws as f64))
-                })
-                .collect();
+            let multi = anchor_values(brdf, anchors, plan.stochastic, spp, seed);
             accumulate(records, pixels, diffuse, seed, |k, s, rng| {
                 let (wi, wo) = at(s);
                 match &anchors.corners[k] {
@@ -117,6 +104,152 @@ pub fn render_planned<T: Real, B: ScalarBrdf<T> + ?Sized>(
     }
 }
 
+/// [`render_planned`] once per seed of `seeds`, computing what does not depend on the seed once:
+/// where the multiple-bounce term is interpolated from anchors, the exact single-bounce term
+/// and the diffuse term are summed in one pass ([`render_planned_split`]) and each seed adds
+/// only its interpolated estimate; where the term is skipped, one render serves every seed. The
+/// pair loss of the stochastic models compares two renders (`fit::objective`), so this halves
+/// their per-pixel work. Equal to the renders of [`render_planned`] up to the rounding of one
+/// addition per pixel.
+#[allow(clippy::too_many_arguments)]
+pub fn render_planned_streams<T: Real, B: ScalarBrdf<T> + ?Sized>(
+    brdf: &B,
+    single: &SingleBounce<T>,
+    diffuse: [T; 3],
+    records: &ShadingRecords,
+    pixels: &[usize],
+    plan: &RenderPlan,
+    seeds: &[u64],
+) -> Vec<Vec<[T; 3]>> {
+    let separately = || {
+        seeds
+            .iter()
+            .map(|&seed| render_planned(brdf, single, diffuse, records, pixels, plan, seed))
+            .collect()
+    };
+    match (plan.multi_term(single), seeds) {
+        (_, [] | [_]) | (MultiTerm::Exact, _) => separately(),
+        (MultiTerm::Skipped, [first, ..]) => {
+            vec![render_model(single, diffuse, records, pixels, *first); seeds.len()]
+        }
+        (MultiTerm::Sparse(_), _) => {
+            let split = render_planned_split(brdf, single, diffuse, records, pixels, plan, seeds);
+            let Some(SplitRender {
+                shared: Some(shared),
+                own,
+            }) = split
+            else {
+                return separately();
+            };
+            own.into_iter()
+                .map(|mut own| {
+                    add_to(&mut own, &shared);
+                    own
+                })
+                .collect()
+        }
+    }
+}
+
+/// `target += addend`, pixel by pixel.
+pub fn add_to<T: Real>(target: &mut [[T; 3]], addend: &[[T; 3]]) {
+    for (t, a) in target.iter_mut().zip(addend) {
+        for c in 0..3 {
+            t[c] += a[c];
+        }
+    }
+}
+
+/// A render through a plan whose multiple-bounce term is interpolated from anchors (at the
+/// roughness of `single`), split into the part no seed changes, the exact single-bounce and
+/// diffuse terms at the pixels with anchors (`None` when `diffuse` is `None`: not wanted), and
+/// per seed of `seeds` the rest: the interpolated estimate, and the whole value of the pixels
+/// without anchors. The parts sum to the render. `None` when the plan does not interpolate at
+/// this roughness. Variable projection (`fit::projection`) uses the split because the shared
+/// part is affine in a Schlick F0 and needs no render at its inner nodes.
+#[allow(clippy::too_many_arguments)]
+pub fn render_planned_split<T: Real, B: ScalarBrdf<T> + ?Sized>(
+    brdf: &B,
+    single: &SingleBounce<T>,
+    diffuse: impl Into<Option<[T; 3]>>,
+    records: &ShadingRecords,
+    pixels: &[usize],
+    plan: &RenderPlan,
+    seeds: &[u64],
+) -> Option<SplitRender<T>> {
+    let MultiTerm::Sparse(anchors) = plan.multi_term(single) else {
+        return None;
+    };
+    let at = |s: usize| (Vec3::from_f64(records.wi[s]), Vec3::from_f64(records.wo[s]));
+    let spp = records.samples_per_pixel;
+    let zero = Rgb::splat(T::zero());
+    let shared = diffuse.into().map(|diffuse| {
+        let seed = seeds.first().copied().unwrap_or(0);
+        accumulate(records, pixels, diffuse, seed, |k, s, _| {
+            match anchors.corners[k] {
+                Some(_) => {
+                    let (wi, wo) = at(s);
+                    single.eval(wi, wo)
+                }
+                None => zero,
+            }
+        })
+    });
+    let own = seeds
+        .iter()
+        .map(|&seed| {
+            let multi = anchor_values(brdf, anchors, plan.stochastic, spp, seed);
+            accumulate(
+                records,
+                pixels,
+                [T::zero(); 3],
+                seed,
+                |k, s, rng| match &anchors.corners[k] {
+                    Some(corners) => anchors::Anchors::interpolate(corners, &multi),
+                    None => {
+                        let (wi, wo) = at(s);
+                        brdf.eval_total(wi, wo, rng)
+                    }
+                },
+            )
+        })
+        .collect();
+    Some(SplitRender { shared, own })
+}
+
+/// The parts of [`render_planned_split`]: their sum, pixel by pixel, is the render of each seed.
+pub struct SplitRender<T> {
+    /// The exact single-bounce and diffuse terms at the pixels with anchors (when asked for).
+    pub shared: Option<Vec<[T; 3]>>,
+    /// Per seed: the interpolated multiple-bounce estimate, and the pixels without anchors.
+    pub own: Vec<Vec<[T; 3]>>,
+}
+
+/// The multiple-bounce estimate at every anchor of `anchors`, each from a stream of its own
+/// (the mean of `spp` draws for a stochastic model, one evaluation otherwise).
+fn anchor_values<T: Real, B: ScalarBrdf<T> + ?Sized>(
+    brdf: &B,
+    anchors: &anchors::Anchors,
+    stochastic: bool,
+    spp: usize,
+    seed: u64,
+) -> Vec<Rgb<T>> {
+    let draws = if stochastic { spp } else { 1 };
+    anchors
+        .points
+        .par_iter()
+        .map(|a| {
+            let mut rng = rng_stream(seed ^ ANCHOR_STREAMS, a.pixel as u64);
+            let (wi, wo) = (Vec3::from_f64(a.wi), Vec3::from_f64(a.wo));
+            let mut sum = Rgb::splat(T::zero());
+            for _ in 0..draws {
+                sum = sum + brdf.eval_split(wi, wo, &mut rng).1;
+            }
+            sum.scale(T::c(1.0 / draws as f64))
+        })
+        .collect()
+}
+
 /// [`render_pixels`] through `plan`.
 pub fn render_material(
     material: &Material,
@@ -125,10 +258,31 @@ pub fn render_material(
     plan: &RenderPlan,
     seed: u64,
 ) -> Vec<[f64; 3]> {
+    let mut renders = render_material_streams(material, records, pixels, plan, &[seed]);
+    renders.pop().expect("one render per seed")
+}
+
+/// [`render_material`] once per seed of `seeds`, sharing what does not depend on the seed
+/// ([`render_planned_streams`]).
+pub fn render_material_streams(
+    material: &Material,
+    records: &ShadingRecords,
+    pixels: &[usize],
+    plan: &RenderPlan,
+    seeds: &[u64],
+) -> Vec<Vec<[f64; 3]>> {
     let brdf = material.brdf();
     let single = material.single::<f64>();
     let diffuse = material.diffuse;
-    render_planned(brdf.as_ref(), &single, diffuse, records, pixels, plan, seed)
+    render_planned_streams(
+        brdf.as_ref(),
+        &single,
+        diffuse,
+        records,
+        pixels,
+        plan,
+        seeds,
+    )
 }
 
 /// `f` at each distinct direction pair of `repeated`, from a stream of its own.

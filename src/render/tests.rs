@@ -284,3 +284,52 @@ fn sparse_renders_differentiate_exactly() {
         );
     }
 }
+
+/// The renders of the pair loss share their seed-free work and still equal separate renders:
+/// for a stochastic model with sparse anchors (and a diffuse layer) each stream matches
+/// `render_planned` of its seed to rounding, the two streams differ (their estimates are
+/// independent), and where the multiple-bounce term is skipped both streams are the same render.
+#[test]
+fn streams_share_the_exact_terms_and_match_separate_renders() {
+    let records = pinhole_records(16, 4, false);
+    let pixels = lit_pixels(&records);
+    let seeds = [4, 4 ^ 0xD1B5_4A32_D192_ED03];
+    let rms = |a: &[[f64; 3]]| {
+        (a.iter().flatten().map(|v| v * v).sum::<f64>() / (3 * a.len()) as f64).sqrt()
+    };
+    for (alpha, skips) in [
+        (0.5, SPARSE_ONLY),
+        (0.5, Skips::none()),
+        (0.005, Skips::all()),
+    ] {
+        let m = Material {
+            diffuse: [0.05, 0.1, 0.2],
+            ..material(Model::Bitterli, alpha, copper())
+        };
+        let plan = RenderPlan::for_material(skips, &m, &records, &pixels);
+        let shared = render_material_streams(&m, &records, &pixels, &plan, &seeds);
+        let single = m.single::<f64>();
+        let brdf = m.brdf();
+        for (render, &seed) in shared.iter().zip(&seeds) {
+            let alone = render_planned(
+                brdf.as_ref(),
+                &single,
+                m.diffuse,
+                &records,
+                &pixels,
+                &plan,
+                seed,
+            );
+            let worst = render
+                .iter()
+                .flatten()
+                .zip(alone.iter().flatten())
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(worst <= 1e-13 * rms(&alone), "alpha {alpha}: {worst:e}");
+        }
+        let skipped = matches!(plan.multi_term(&single), MultiTerm::Skipped);
+        assert_eq!(skipped, alpha < 0.01);
+        assert_eq!(shared[0] == shared[1], skipped, "alpha {alpha}");
+    }
+}
