@@ -22,7 +22,7 @@ fn assert_recovered(fit: &serde_json::Value, truth: &serde_json::Value, rel: f64
 }
 
 #[test]
-fn variable_projection_reaches_the_joint_optimum_with_fewer_evaluations() {
+fn variable_projection_starts_at_the_joint_optimum() {
     let dir = tempfile::tempdir().unwrap();
     let set = repo("datasets/aluminium-pinhole");
     let truth = read_json(&repo("datasets/aluminium-pinhole/material.json"));
@@ -47,12 +47,16 @@ fn variable_projection_reaches_the_joint_optimum_with_fewer_evaluations() {
     );
     assert!(la <= lb * (1.0 + 1e-6), "projected loss {la} vs joint {lb}");
     assert_recovered(&projected, &truth, 0.01, 0.01);
-    // The point of projection: the search is over roughness only.
-    let (ea, eb) = (
-        projected["evaluations"].as_u64().unwrap(),
-        joint["evaluations"].as_u64().unwrap(),
+    // The point of projection: the search over roughness alone (F0 solved in closed form)
+    // already ends at the joint optimum, so the joint search has little left to do. (Counted
+    // in iterations: an evaluation of the joint search is one dual-number pass for cost and
+    // gradient, of the projection one render per F0 node; on this set both fits take about
+    // the same time.)
+    let (ia, ib) = (
+        projected["iterations"].as_u64().unwrap(),
+        joint["iterations"].as_u64().unwrap(),
     );
-    assert!(ea < eb, "projected {ea} evaluations vs joint {eb}");
+    assert!(4 * ia <= ib, "projected {ia} iterations vs joint {ib}");
 }
 
 #[test]
