@@ -125,8 +125,8 @@ pub fn render_material(
     plan: &RenderPlan,
     seed: u64,
 ) -> Vec<[f64; 3]> {
-    let brdf = material.brdf();
     let single = material.single::<f64>();
+    let brdf = material.capped_brdf(plan.bounce_cap(&single));
     let diffuse = material.diffuse;
     render_planned(brdf.as_ref(), &single, diffuse, records, pixels, plan, seed)
 }
