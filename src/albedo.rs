@@ -189,12 +189,46 @@ pub struct BounceEnergy {
 }
 
 pub fn albedo_by_bounce(brdf: &dyn Brdf, wi: Vec3<f64>, samples: usize, seed: u64) -> BounceEnergy {
+    let moments = bounce_moments(brdf, wi, samples, seed, 4);
+    BounceEnergy {
+        by_bounce: std::array::from_fn(|k| moments.mean[k]),
+        resolved: moments.resolved,
+        samples: moments.samples,
+    }
+}
+
+/// First and second moments of the sampled weight split by bounce count: column `k` holds the
+/// paths of `k + 1` bounces, the last column every longer path too (split as in
+/// [`albedo_by_bounce`], which is this with 4 columns). A path falls in exactly one column, so
+/// the energy of any set of columns is the sum of their means and the per-sample second moment
+/// of that sum is the sum of their `mean_square`s.
+#[derive(Clone, Debug)]
+pub struct BounceMoments {
+    pub mean: Vec<[f64; 3]>,
+    pub mean_square: Vec<[f64; 3]>,
+    pub resolved: bool,
+    pub samples: usize,
+}
+
+pub fn bounce_moments(
+    brdf: &dyn Brdf,
+    wi: Vec3<f64>,
+    samples: usize,
+    seed: u64,
+    columns: usize,
+) -> BounceMoments {
     let n = (samples.max(4) as f64).sqrt().ceil() as usize;
-    let rows: Vec<([[f64; 3]; 4], bool)> = (0..n)
+    let columns = columns.max(2);
+    // Per row of the stratification: sums (not yet means) of the weights and their squares.
+    let rows: Vec<BounceMoments> = (0..n)
         .into_par_iter()
         .map(|j| {
             let mut rng = rng_stream(seed, j as u64);
-            let mut acc = [[0.0; 3]; 4];
+            let (mut acc, mut acc2) = (vec![[0.0; 3]; columns], vec![[0.0; 3]; columns]);
+            let mut add = |k: usize, c: usize, w: f64| {
+                acc[k][c] += w;
+                acc2[k][c] += w * w;
+            };
             let mut resolved = true;
             for i in 0..n {
                 let u = [
@@ -209,29 +243,37 @@ pub fn albedo_by_bounce(brdf: &dyn Brdf, wi: Vec3<f64>, samples: usize, seed: u6
                     let v = brdf.eval(wi, s.wo, &mut rng);
                     let scale = s.wo.z / s.pdf;
                     for (c, (single, multi)) in v.single.iter().zip(&v.multi).enumerate() {
-                        acc[0][c] += single * scale;
-                        acc[1][c] += multi * scale;
+                        add(0, c, single * scale);
+                        add(1, c, multi * scale);
                     }
                 } else {
-                    let k = (s.bounces as usize).min(4) - 1;
-                    (0..3).for_each(|c| acc[k][c] += s.weight[c]);
+                    let k = (s.bounces as usize).min(columns) - 1;
+                    (0..3).for_each(|c| add(k, c, s.weight[c]));
                 }
             }
-            (acc, resolved)
+            BounceMoments {
+                mean: acc,
+                mean_square: acc2,
+                resolved,
+                samples: n,
+            }
         })
         .collect();
     let total = (n * n) as f64;
-    let mut by_bounce = [[0.0; 3]; 4];
-    for (acc, _) in &rows {
-        for k in 0..4 {
+    let mut mean = vec![[0.0; 3]; columns];
+    let mut mean_square = vec![[0.0; 3]; columns];
+    for row in &rows {
+        for k in 0..columns {
             for c in 0..3 {
-                by_bounce[k][c] += acc[k][c] / total;
+                mean[k][c] += row.mean[k][c] / total;
+                mean_square[k][c] += row.mean_square[k][c] / total;
             }
         }
     }
-    BounceEnergy {
-        by_bounce,
-        resolved: rows.iter().all(|r| r.1),
+    BounceMoments {
+        mean,
+        mean_square,
+        resolved: rows.iter().all(|r| r.resolved),
         samples: n * n,
     }
 }

@@ -7,7 +7,7 @@
 use crate::bsdf::heitz::Heitz;
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::wang::{Wang, WangEstimator};
-use crate::bsdf::{Brdf, Model};
+use crate::bsdf::{BounceCap, Brdf, Model};
 use crate::error::{Error, Result};
 use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
 use crate::scalar::{Real, Rgb};
@@ -298,35 +298,27 @@ impl Material {
     /// The specular model as a BRDF object (the diffuse layer is added by the renderer).
     /// `heitz` ignores `height`: its first order is the height-correlated single bounce.
     pub fn brdf(&self) -> Box<dyn Brdf> {
+        self.capped_brdf(BounceCap::NONE)
+    }
+
+    /// [`Material::brdf`] with the stochastic estimators limited to paths of `cap` reflections
+    /// (the analytic models ignore it).
+    pub fn capped_brdf(&self, cap: BounceCap) -> Box<dyn Brdf> {
+        let single = self.single::<f64>();
+        let (mf, fresnel) = (single.microfacet, single.fresnel);
+        let wang = |estimator| Box::new(Wang::new(single, estimator).with_bounce_cap(cap));
         match self.model {
-            Model::Single => Box::new(self.single::<f64>()),
-            Model::FastMsx => Box::new(crate::bsdf::fast_msx::FastMsx {
-                single: self.single::<f64>(),
-            }),
-            Model::KullaConty => Box::new(crate::bsdf::kulla_conty::KullaConty::new(
-                self.single::<f64>(),
-            )),
-            Model::Turquin => Box::new(crate::bsdf::turquin::Turquin::new(self.single::<f64>())),
+            Model::Single => Box::new(single),
+            Model::FastMsx => Box::new(crate::bsdf::fast_msx::FastMsx { single }),
+            Model::KullaConty => Box::new(crate::bsdf::kulla_conty::KullaConty::new(single)),
+            Model::Turquin => Box::new(crate::bsdf::turquin::Turquin::new(single)),
             Model::Bitterli => {
-                let s = self.single::<f64>();
-                Box::new(crate::bsdf::bitterli::Bitterli::new(
-                    s.microfacet,
-                    s.fresnel,
-                ))
+                Box::new(crate::bsdf::bitterli::Bitterli::new(mf, fresnel).with_bounce_cap(cap))
             }
-            Model::Cui => {
-                let s = self.single::<f64>();
-                Box::new(crate::bsdf::cui::Cui::new(s.microfacet, s.fresnel))
-            }
-            Model::Heitz => {
-                let single = self.single::<f64>();
-                Box::new(Heitz::new(single.microfacet, single.fresnel))
-            }
-            Model::WangPt => Box::new(Wang::new(self.single::<f64>(), WangEstimator::PathTracing)),
-            Model::WangBdpt => Box::new(Wang::new(
-                self.single::<f64>(),
-                WangEstimator::Bidirectional,
-            )),
+            Model::Cui => Box::new(crate::bsdf::cui::Cui::new(mf, fresnel).with_bounce_cap(cap)),
+            Model::Heitz => Box::new(Heitz::new(mf, fresnel).with_bounce_cap(cap)),
+            Model::WangPt => wang(WangEstimator::PathTracing),
+            Model::WangBdpt => wang(WangEstimator::Bidirectional),
         }
     }
 }

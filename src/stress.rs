@@ -29,7 +29,7 @@
 //!   tested value the f32 evaluation: the deviation shows where a formula loses precision.
 
 use crate::albedo::{directional_albedo, mean_value, rng_stream, Adjoint};
-use crate::bsdf::{differentiable, Brdf, Model};
+use crate::bsdf::{differentiable, BounceCap, Brdf, Model};
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::{Height, NdfKind};
 use crate::scalar::Vec3;
@@ -414,7 +414,9 @@ fn run_query(model: Model, size: SweepSize, index: usize, q: &Query, seed: u64) 
             tally.fallbacks += fallbacks;
             tally.paths += paths;
         }
-    } else if let Some(low) = differentiable::<f32>(model, material.single::<f32>()) {
+    } else if let Some(low) =
+        differentiable::<f32>(model, material.single::<f32>(), BounceCap::NONE)
+    {
         let to32 = |w: Vec3<f64>| Vec3::new(w.x as f32, w.y as f32, w.z as f32);
         let v32 = low.eval_total(to32(q.wi), to32(q.wo), &mut rng).0;
         for c in 0..3 {

@@ -3,8 +3,8 @@
 //!
 //! | job | what is timed | skip |
 //! | --- | --- | --- |
-//! | `render` | [`render_all`] of the records of a capture template (built once, 1 sample per pixel, no targets) with the template's material under each model; after one untimed render, the median of repeated renders until [`RenderTiming::min_seconds`] have passed | `false`: every pixel, exactly; `true`: only the pixels that enter a loss (weight > 0), through the [`RenderPlan`] a fit would use; `rel_error_vs_exact` is the RMS difference from the exact render relative to its RMS |
-//! | `fit` | [`fit_model`] of each model to a photo set (records built once, optionally halved in resolution `halvings` times); the final loss and `alpha_rel_error = (alpha - alpha_true) / alpha_true` against the set's `material.json` | `false`: `--no-skip all`; `true`: every skip of [`crate::render::plan`] (pixels of weight 0 are never rendered by a fit) |
+//! | `render` | [`render_all`] of the records of a capture template (built once, 1 sample per pixel, no targets) with the template's material under each model; after one untimed render, the median of repeated renders until [`RenderTiming::min_seconds`] have passed | `false`: every pixel, exactly; `true`: only the pixels that enter a loss (weight > 0), through the [`RenderPlan`] a fit would use (the skips `--no-skip` leaves on); `rel_error_vs_exact` is the RMS difference from the exact render relative to its RMS |
+//! | `fit` | [`fit_model`] of each model to a photo set (records built once, optionally halved in resolution `halvings` times); the final loss and `alpha_rel_error = (alpha - alpha_true) / alpha_true` against the set's `material.json` | `false`: `--no-skip all`; `true`: every skip of [`crate::render::plan`] that `--no-skip` leaves on (pixels of weight 0 are never rendered by a fit) |
 //!
 //! `skipped_pixels` says how many pixels of weight 0 were left out; `plan` what the render
 //! plan skipped.
@@ -140,8 +140,8 @@ pub struct RenderTiming {
 /// and with it (pixels of weight > 0).
 pub fn render_jobs(
     records: &ShadingRecords,
-    material: &Material,
-    model: Model,
+    (material, model): (&Material, Model),
+    skips: Skips,
     timing: RenderTiming,
     seed: u64,
 ) -> [JobRow; 2] {
@@ -152,7 +152,7 @@ pub fn render_jobs(
     let used: Vec<usize> = (0..records.pixel_count())
         .filter(|&p| records.weight[p] > 0.0)
         .collect();
-    let plan = RenderPlan::for_material(Skips::all(), &material, records, &used);
+    let plan = RenderPlan::for_material(skips, &material, records, &used);
     let planned = || render_material(&material, records, &used, &plan, seed);
     // One untimed render wakes the thread pool and touches the records.
     let exact = render_all(&material, records, seed);
@@ -192,7 +192,7 @@ pub fn render_jobs(
         row.seconds = seconds[seconds.len() / 2];
         row.cpu_seconds = (process_seconds() - cpu) / seconds.len() as f64;
         if skip {
-            row.plan = Some(plan.summary());
+            row.plan = Some(plan.summary(&material));
             row.rel_error_vs_exact = Some(error);
         }
         row
@@ -262,7 +262,13 @@ mod tests {
             min_seconds: 0.0,
             max_repeats: 3,
         };
-        let [all, skipping] = render_jobs(&records, &material, Model::Single, timing, 0);
+        let [all, skipping] = render_jobs(
+            &records,
+            (&material, Model::Single),
+            Skips::all(),
+            timing,
+            0,
+        );
         assert!(!all.skip && skipping.skip);
         for row in [&all, &skipping] {
             assert_eq!(row.pixels + row.skipped_pixels, 9 * 32 * 32);

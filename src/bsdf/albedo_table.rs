@@ -44,8 +44,12 @@ const TABLE_KINDS: [(NdfKind, Height); 4] = [
 
 /// Table `slot` of [`EMBEDDED`]: `ALPHA_COUNT * MU_COUNT` values of `E`.
 fn embedded_e(slot: usize) -> Vec<f64> {
-    let len = ALPHA_COUNT * MU_COUNT * 8;
-    EMBEDDED[slot * len..(slot + 1) * len]
+    embedded_slot(EMBEDDED, slot, ALPHA_COUNT * MU_COUNT)
+}
+
+/// Table `slot` of `len` little-endian f64 values in an embedded file of equal tables.
+pub(crate) fn embedded_slot(bytes: &[u8], slot: usize, len: usize) -> Vec<f64> {
+    bytes[slot * len * 8..(slot + 1) * len * 8]
         .chunks_exact(8)
         .map(|b| f64::from_le_bytes(b.try_into().expect("chunks of 8 bytes")))
         .collect()

@@ -46,7 +46,7 @@ use super::position_free::{
     connect, mis_pdf, scatter, signed_lambda, survival, walk_sample, MAX_WALK_BOUNCES,
 };
 use super::single::SingleBounce;
-use super::{Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
+use super::{BounceCap, Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
 use crate::microfacet::{Fresnel, Height, Microfacet};
 use crate::scalar::{Real, Rgb, Vec3};
 use rand::Rng as _;
@@ -233,6 +233,7 @@ pub struct Bitterli<T = f64> {
     /// The same surface with white Fresnel (for the MIS density).
     white: SingleBounce<T>,
     max_closed_form: usize,
+    cap: BounceCap,
     fallbacks: AtomicU64,
     paths: AtomicU64,
 }
@@ -251,6 +252,7 @@ impl<T: Real> Bitterli<T> {
                 height: Height::Correlated,
             },
             max_closed_form: MAX_CLOSED_FORM_BOUNCES,
+            cap: BounceCap::NONE,
             fallbacks: AtomicU64::new(0),
             paths: AtomicU64::new(0),
         }
@@ -261,6 +263,12 @@ impl<T: Real> Bitterli<T> {
     /// explicit-depth fallback (a test of the fallback).
     pub fn with_max_closed_form(mut self, bounces: usize) -> Self {
         self.max_closed_form = bounces.clamp(1, MAX_CLOSED_FORM_BOUNCES);
+        self
+    }
+
+    /// The same model with paths of more than `cap` reflections dropped.
+    pub fn with_bounce_cap(mut self, cap: BounceCap) -> Self {
+        self.cap = cap;
         self
     }
 
@@ -307,7 +315,8 @@ impl<T: Real> Bitterli<T> {
         let mut fell_back = false;
         let (mut d, mut beta) = (d0, [T::one(); 3]);
         let (mut d_first, mut ratio) = (T::zero(), T::one());
-        for bounce in 1..MAX_WALK_BOUNCES as usize {
+        // Vertex `bounce` closes paths of `bounce + 1` reflections.
+        for bounce in 1..self.cap.limit(MAX_WALK_BOUNCES) as usize {
             // Random decisions of this step.
             let u = [rng.random::<f64>(), rng.random::<f64>()];
             let u_depth: f64 = rng.random();
@@ -440,7 +449,7 @@ impl Bitterli<f64> {
         // Probability of the "stay" decisions taken so far (the mass left, as used).
         let mut stay = 1.0;
         let (mut d, mut beta) = (d0, [1.0; 3]);
-        for bounce in 1..=MAX_WALK_BOUNCES {
+        for bounce in 1..=self.cap.limit(MAX_WALK_BOUNCES) {
             let u = if bounce == 1 {
                 u_first
             } else {

@@ -49,7 +49,7 @@ use super::position_free::{
     connect, mis_pdf, scatter, signed_lambda, survival, walk_sample, MAX_WALK_BOUNCES,
 };
 use super::single::SingleBounce;
-use super::{Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
+use super::{BounceCap, Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
 use crate::microfacet::{Fresnel, Height, Microfacet};
 use crate::scalar::{Real, Rgb, Vec3};
 use rand::Rng as _;
@@ -134,6 +134,7 @@ pub struct Cui<T = f64> {
     /// Exact single-bounce part, height-correlated.
     pub single: SingleBounce<T>,
     white: SingleBounce<T>,
+    cap: BounceCap,
 }
 
 impl<T: Real> Cui<T> {
@@ -149,7 +150,13 @@ impl<T: Real> Cui<T> {
                 fresnel: Fresnel::White,
                 height: Height::Correlated,
             },
+            cap: BounceCap::NONE,
         }
+    }
+
+    /// The same model with paths of more than `cap` reflections dropped.
+    pub fn with_bounce_cap(self, cap: BounceCap) -> Self {
+        Cui { cap, ..self }
     }
 
     /// Alg. 3 without its first term: an estimate of `f_multi(wi, wo) wo.z`.
@@ -168,7 +175,8 @@ impl<T: Real> Cui<T> {
         // w = prod F, lambdas = prod |Lambda(d_t)| over the vertices left so far: together
         // prod v / pdf of the sampled steps.
         let (mut d, mut s_d, mut w, mut lambdas) = (d0, s0, [T::one(); 3], T::one());
-        for _ in 1..MAX_WALK_BOUNCES {
+        // Step `k` reaches vertex `k`, whose connection closes paths of `k + 1` reflections.
+        for _ in 1..self.cap.limit(MAX_WALK_BOUNCES) {
             let u = [rng.random::<f64>(), rng.random::<f64>()];
             let Some(step) = scatter(mf, fresnel, d, u) else {
                 break;
@@ -248,7 +256,7 @@ impl Cui<f64> {
         seg.add(s0);
         // w = prod F; ratio = prod |Lambda(d_t)| / P(exit decisions so far).
         let (mut d, mut s_d, mut w, mut ratio) = (d0, s0, [1.0; 3], 1.0);
-        for bounce in 1..=MAX_WALK_BOUNCES {
+        for bounce in 1..=self.cap.limit(MAX_WALK_BOUNCES) {
             let u = if bounce == 1 {
                 u_first
             } else {

@@ -126,7 +126,7 @@
 //! renderer's MIS stays unbiased.
 
 use super::single::SingleBounce;
-use super::{Brdf, BrdfSample, BrdfValue, Rng};
+use super::{BounceCap, Brdf, BrdfSample, BrdfValue, Rng};
 use crate::microfacet::{Fresnel, Height, Microfacet};
 use crate::scalar::Vec3;
 use rand::Rng as _;
@@ -137,6 +137,7 @@ use std::f64::consts::FRAC_1_PI;
 pub struct Heitz {
     pub microfacet: Microfacet<f64>,
     pub fresnel: Fresnel<f64>,
+    cap: BounceCap,
 }
 
 /// A direction of flight with `|w.z| Lambda(w)` (of `w` mirrored upward), computed once per
@@ -221,7 +222,13 @@ impl Heitz {
         Heitz {
             microfacet,
             fresnel,
+            cap: BounceCap::NONE,
         }
+    }
+
+    /// The same model with paths of more than `cap` reflections dropped.
+    pub fn with_bounce_cap(self, cap: BounceCap) -> Self {
+        Heitz { cap, ..self }
     }
 
     /// The exact first order: the height-correlated single-bounce BRDF of the same surface.
@@ -367,6 +374,9 @@ impl Heitz {
                 Some(next) => t = next,
                 None => return Some((w.normalize(), weight, order)),
             }
+            if order >= self.cap.limit(u32::MAX) {
+                return None; // the next reflection would pass the cap
+            }
             order += 1;
             uv = [rng.random(), rng.random()];
         }
@@ -388,8 +398,9 @@ impl Brdf for Heitz {
             return BrdfValue::default();
         }
         let single = SingleBounce::eval(&self.single(), wi, wo).0;
-        let forward = self.nee_walk(wi, wo, rng, 2, u32::MAX, Weighting::Balance);
-        let backward = self.nee_walk(wo, wi, rng, 2, u32::MAX, Weighting::Balance);
+        let last = self.cap.limit(u32::MAX);
+        let forward = self.nee_walk(wi, wo, rng, 2, last, Weighting::Balance);
+        let backward = self.nee_walk(wo, wi, rng, 2, last, Weighting::Balance);
         BrdfValue {
             single,
             multi: [0, 1, 2].map(|c| forward[c] + backward[c]),

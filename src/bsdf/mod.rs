@@ -18,6 +18,7 @@
 
 pub mod albedo_table;
 pub mod bitterli;
+pub mod bounce_tails;
 #[cfg(test)]
 mod compensation_tests;
 pub mod cui;
@@ -42,6 +43,34 @@ use serde::{Deserialize, Serialize};
 
 /// The random number generator every stochastic estimator draws from (deterministic per seed).
 pub type Rng = rand_pcg::Pcg64Mcg;
+
+/// Most reflections a path of a stochastic estimator may have (`heitz`, `bitterli`, `cui`,
+/// `wang-*`): a walk that would go past it is not continued, so paths of more reflections are
+/// dropped from the estimate (a bias of minus their energy). The render plan's `bounce-cap`
+/// skip chooses it from [`bounce_tails`]; [`BounceCap::NONE`] leaves every estimator as it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BounceCap(u32);
+
+impl BounceCap {
+    /// No cap beyond each estimator's own safety limit.
+    pub const NONE: BounceCap = BounceCap(u32::MAX);
+
+    /// Paths of at most `reflections` reflections (at least 1: the single bounce).
+    pub fn at(reflections: u32) -> BounceCap {
+        BounceCap(reflections.max(1))
+    }
+
+    /// The cap, `None` when there is none.
+    pub fn get(self) -> Option<u32> {
+        (self != BounceCap::NONE).then_some(self.0)
+    }
+
+    /// An estimator's own limit on reflections, lowered to the cap.
+    #[inline]
+    pub fn limit(self, own: u32) -> u32 {
+        own.min(self.0)
+    }
+}
 
 /// A BRDF value split by path length.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -138,21 +167,25 @@ impl ScalarBrdf<f64> for dyn Brdf {
     }
 }
 
-/// `model` built on `single` at scalar type `T`, for the models whose value is generic over
-/// the scalar; `None` for `heitz` (explicit heights: finite differences only).
+/// `model` built on `single` at scalar type `T`, its stochastic estimators limited to `cap`,
+/// for the models whose value is generic over the scalar; `None` for `heitz` (explicit
+/// heights: finite differences only).
 pub fn differentiable<T: Real>(
     model: Model,
     single: single::SingleBounce<T>,
+    cap: BounceCap,
 ) -> Option<Box<dyn ScalarBrdf<T>>> {
+    let (mf, fresnel) = (single.microfacet, single.fresnel);
+    let wang = |estimator| wang::Wang::new(single, estimator).with_bounce_cap(cap);
     Some(match model {
         Model::Single => Box::new(single),
         Model::FastMsx => Box::new(fast_msx::FastMsx { single }),
         Model::KullaConty => Box::new(kulla_conty::KullaConty::new(single)),
         Model::Turquin => Box::new(turquin::Turquin::new(single)),
-        Model::Bitterli => Box::new(bitterli::Bitterli::new(single.microfacet, single.fresnel)),
-        Model::Cui => Box::new(cui::Cui::new(single.microfacet, single.fresnel)),
-        Model::WangPt => Box::new(wang::Wang::new(single, wang::WangEstimator::PathTracing)),
-        Model::WangBdpt => Box::new(wang::Wang::new(single, wang::WangEstimator::Bidirectional)),
+        Model::Bitterli => Box::new(bitterli::Bitterli::new(mf, fresnel).with_bounce_cap(cap)),
+        Model::Cui => Box::new(cui::Cui::new(mf, fresnel).with_bounce_cap(cap)),
+        Model::WangPt => Box::new(wang(wang::WangEstimator::PathTracing)),
+        Model::WangBdpt => Box::new(wang(wang::WangEstimator::Bidirectional)),
         _ => return None,
     })
 }

@@ -24,6 +24,7 @@ use std::f64::consts::FRAC_1_PI;
 /// Safety cap on the number of reflections of one walk. A walk on a conservative surface leaves
 /// after a few bounces (the optical depth drifts upward), so the cap is never reached in
 /// practice; reaching it drops the path (a bias below 1e-12 in every configuration tested).
+/// A [`super::BounceCap`] lowers it.
 pub(crate) const MAX_WALK_BOUNCES: u32 = 1024;
 
 /// Cui's signed Lambda of a flow direction: `+|Lambda(d)|` upward, `-|Lambda(d)|` downward, where

@@ -9,8 +9,8 @@
 use super::single::SingleBounce;
 use super::{Brdf, Rng};
 use crate::albedo::{directional_albedo, rng_stream, Estimate};
-use crate::material::FresnelSpec;
-use crate::microfacet::{Microfacet, NdfKind};
+use crate::material::{FresnelSpec, Material};
+use crate::microfacet::{Height, Microfacet, NdfKind};
 use crate::scalar::Vec3;
 use rand::Rng as _;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -34,6 +34,19 @@ pub fn random_upper(rng: &mut Rng) -> Vec3<f64> {
     let r = u.sqrt();
     let phi = 2.0 * PI * v;
     Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u).max(1e-6).sqrt())
+}
+
+/// The material of `model` on isotropic GGX at roughness `alpha`, correlated heights, no
+/// diffuse layer.
+pub fn ggx_material(model: super::Model, alpha: f64, fresnel: FresnelSpec) -> Material {
+    Material {
+        model,
+        ndf: NdfKind::Ggx,
+        height: Height::Correlated,
+        alpha: [alpha, alpha],
+        fresnel,
+        diffuse: [0.0; 3],
+    }
 }
 
 /// Mean of `n` independent evaluations of `f(wi, wo)` with its standard error.

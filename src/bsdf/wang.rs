@@ -14,7 +14,7 @@
 //! | kind | stochastic (`eval` is a one-path estimate) | stochastic |
 //! | single bounce | exact, [`SingleBounce`] with the same height model | same |
 //! | >= 2 bounces | path tracing with next-event estimation at every vertex, sec. 4.1 eq. 24-26 | bidirectional, every connection, balance heuristic, sec. 4.2 eq. 27-29 |
-//! | bias | none w.r.t. eq. 5, except paths longer than [`MAX_SAMPLED`] + 1 bounces (at `alpha = 3` a walk exceeds 20 bounces with probability ~5e-6, so far below 1e-12) | same (paths longer than `2 MAX_SAMPLED + 1` bounces) |
+//! | bias | none w.r.t. eq. 5, except paths longer than [`MAX_SAMPLED`] + 1 bounces (at `alpha = 3` a walk exceeds 20 bounces with probability ~5e-6, so far below 1e-12) or than a [`BounceCap`] | same (paths longer than `2 MAX_SAMPLED + 1` bounces or the cap) |
 //! | variance | heavy-tailed where the multi-bounce part needs directions deep in the visible-normal tails: low-roughness GGX near retro-reflection, Beckmann far from specular | 2.6-2.8x lower per evaluation on typical configurations, orders of magnitude lower in those cases |
 //! | energy | conserving for both height models (white furnace = 1) | same |
 //! | reciprocal | uncorrelated: yes; correlated: no (paper sec. 3.5) | same |
@@ -97,7 +97,7 @@
 
 use super::roulette::piecewise_constant;
 use super::single::SingleBounce;
-use super::{Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
+use super::{BounceCap, Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
 use crate::microfacet::{Height, Microfacet, NdfKind};
 use crate::scalar::{Real, Rgb, Vec3};
 use rand::Rng as _;
@@ -123,6 +123,7 @@ pub struct Wang<T = f64> {
     /// Microsurface, Fresnel and height model; also the exact single-bounce term.
     pub surface: SingleBounce<T>,
     pub estimator: WangEstimator,
+    cap: BounceCap,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -302,7 +303,21 @@ struct Node<T> {
 
 impl<T: Real> Wang<T> {
     pub fn new(surface: SingleBounce<T>, estimator: WangEstimator) -> Self {
-        Wang { surface, estimator }
+        Wang {
+            surface,
+            estimator,
+            cap: BounceCap::NONE,
+        }
+    }
+
+    /// The same model with paths of more than `cap` reflections dropped.
+    pub fn with_bounce_cap(self, cap: BounceCap) -> Self {
+        Wang { cap, ..self }
+    }
+
+    /// Most reflections of a path: `MAX_SAMPLED + 1`, or fewer under the cap.
+    fn most_reflections(&self) -> u32 {
+        self.cap.limit(MAX_SAMPLED as u32 + 1)
     }
 
     fn height(&self) -> Height {
@@ -353,7 +368,7 @@ impl<T: Real> Wang<T> {
         };
         scale(&mut beta, f.0);
         let mut prev = -wi;
-        for _ in 1..=MAX_SAMPLED {
+        for _ in 1..self.most_reflections() {
             let seg = segment(mf, height, prev, d);
             // Next-event estimation at b_m closes a path of m + 1 bounces.
             if let Some((f, d4)) = vertex(&self.surface, -d, wo) {
@@ -413,7 +428,8 @@ impl<T: Real> Wang<T> {
             mis: T::zero(),
         });
         let mut fresnel = [T::one(); 3];
-        for m in 0..MAX_SAMPLED {
+        // Node `m` ends `m` reflections: a connection at it closes at least `m + 1`.
+        for m in 0..self.most_reflections() as usize - 1 {
             let node = nodes[m];
             let Some(q) = Self::survives(node.cont, rng) else {
                 break;
@@ -487,9 +503,11 @@ impl<T: Real> Wang<T> {
         let light = self.subpath(wi, false, rng);
         let camera = self.subpath(wo, true, rng);
         let mut sum = [T::zero(); 3];
+        // The connection of light node `a` and camera node `c` closes `a + c + 1` reflections.
+        let most = self.cap.limit(u32::MAX) as usize;
         for a in 0..light.len() {
             let lf = &light[a];
-            for c in 0..camera.len() {
+            for c in 0..camera.len().min(most - a) {
                 if a + c == 0 {
                     continue; // the single bounce, computed exactly
                 }
@@ -612,7 +630,7 @@ impl Brdf for Wang<f64> {
         let mf = &self.surface.microfacet;
         let mut weight = [1.0; 3];
         let (mut prev, mut w) = (-wi, wi);
-        for bounce in 1..=(MAX_SAMPLED as u32 + 1) {
+        for bounce in 1..=self.most_reflections() {
             if mf.projected_area(w) <= 0.0 {
                 return None;
             }

@@ -208,8 +208,8 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
             };
             job_rows.extend(jobs::render_jobs(
                 records,
-                material,
-                model,
+                (material, model),
+                Skips::except(&args.fit.no_skip),
                 timing,
                 settings.estimators.seed,
             ));
@@ -225,10 +225,11 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
                     records.photos.len()
                 );
             }
-            for skips in [Skips::none(), Skips::all()] {
+            let options = args.fit.fit_options(model, !args.quiet);
+            for skips in [Skips::none(), options.skips] {
                 let options = FitOptions {
                     skips,
-                    ..args.fit.fit_options(model, !args.quiet)
+                    ..options.clone()
                 };
                 job_rows.push(jobs::fit_job(records, truth.as_ref(), &options)?);
             }
@@ -302,7 +303,7 @@ fn notes(settings: &Settings, estimators: &[EstimatorRow], jobs: &[JobRow]) -> V
             .find(|j| j.skip && j.job == jobs::JobKind::Render)
             .map_or(0, |j| j.skipped_pixels);
         notes.push(format!(
-            "render: {} rendered at {}x{}, 1 sample per pixel, median of repeats over at least {} s; skip=true renders only pixels that can enter a loss ({skipped} pixels skipped here) through the render plan a fit uses (stride: anchor stride of the multiple-bounce term; err: RMS difference from the exact render, relative)",
+            "render: {} rendered at {}x{}, 1 sample per pixel, median of repeats over at least {} s; skip=true renders only pixels that can enter a loss ({skipped} pixels skipped here) through the render plan a fit uses (every skip --no-skip leaves on) (stride: anchor stride of the multiple-bounce term; err: RMS difference from the exact render, relative)",
             r.capture.display(),
             r.resolution,
             r.resolution,
@@ -311,7 +312,7 @@ fn notes(settings: &Settings, estimators: &[EstimatorRow], jobs: &[JobRow]) -> V
     }
     if let Some(f) = &settings.fit {
         notes.push(format!(
-            "fit: {} halved {} times, {} samples per pixel, at most {} iterations; skip=false is --no-skip all (pixels of weight 0 are never rendered), skip=true every skip of render::plan; alpha_rel_error is signed, against the set's material.json (the model that made the photos may differ from the fitted one)",
+            "fit: {} halved {} times, {} samples per pixel, at most {} iterations; skip=false is --no-skip all (pixels of weight 0 are never rendered), skip=true every skip of render::plan that --no-skip leaves on; alpha_rel_error is signed, against the set's material.json (the model that made the photos may differ from the fitted one)",
             f.set.display(),
             f.halvings,
             f.pixel_samples,

@@ -93,7 +93,7 @@ pub struct FitOptionArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Work skips to switch off, for comparison (comma-separated: repeated, sparse-multi,
-    /// faint-multi, all); see `bouncefit::render::plan`.
+    /// faint-multi, bounce-cap, all); see `bouncefit::render::plan`.
     #[arg(long, value_enum, value_delimiter = ',')]
     pub no_skip: Vec<Skip>,
     #[command(flatten)]

@@ -347,6 +347,7 @@ fn fit_level(
     } else {
         Vec::new()
     };
+    let render_plan = objective.plan_summary(&material);
     Ok(ModelFit {
         material,
         f0,
@@ -364,7 +365,7 @@ fn fit_level(
         levels: Vec::new(),
         photos,
         trace,
-        render_plan: objective.plan_summary(),
+        render_plan,
         exposure: space.exposure.then(|| ExposureEstimate {
             value: space.exposure(&best_x),
             interval: None,

@@ -16,7 +16,7 @@
 //! variance and pull the fit towards less multiple scattering.
 
 use super::params::ParamSpace;
-use crate::bsdf::differentiable;
+use crate::bsdf::{differentiable, BounceCap};
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::plan::{PlanSummary, RenderPlan, Skips};
 use crate::render::{
@@ -179,9 +179,9 @@ impl<'a> Objective<'a> {
         })
     }
 
-    /// What the render plan skips.
-    pub fn plan_summary(&self) -> PlanSummary {
-        self.plan().summary()
+    /// What the render plan skips, at the roughness of `material`.
+    pub fn plan_summary(&self, material: &crate::material::Material) -> PlanSummary {
+        self.plan().summary(material)
     }
 
     /// Predicted radiance of the loss pixels for `material`, rendered through the plan.
@@ -195,8 +195,12 @@ impl<'a> Objective<'a> {
         let dim = self.space.dim();
         let exact = self.gradient == GradientMethod::Exact
             && (1..=MAX_EXACT_DIM).contains(&dim)
-            && differentiable(self.space.model, self.space.surface(&vec![0.0; dim]).single)
-                .is_some();
+            && differentiable(
+                self.space.model,
+                self.space.surface(&vec![0.0; dim]).single,
+                BounceCap::NONE,
+            )
+            .is_some();
         if exact {
             GradientMethod::Exact
         } else {
@@ -267,8 +271,8 @@ impl<'a> Objective<'a> {
     pub fn render_split(&self, x: &[f64], shared: bool) -> Option<SplitRender<f64>> {
         let material = self.space.material(x);
         let exposure = self.space.exposure(x);
-        let brdf = material.brdf();
         let single = material.single::<f64>();
+        let brdf = material.capped_brdf(self.plan().bounce_cap(&single));
         let diffuse = shared.then_some(material.diffuse);
         let split = render_planned_split(
             brdf.as_ref(),
@@ -365,7 +369,8 @@ impl<'a> Objective<'a> {
             .map(|(i, &v)| DualSVec64::from_re(v).derivative(i))
             .collect();
         let surface = self.space.surface(&coords);
-        let brdf = differentiable(self.space.model, surface.single)?;
+        let cap = self.plan().bounce_cap(&surface.single);
+        let brdf = differentiable(self.space.model, surface.single, cap)?;
         let renders: Vec<Vec<[DualSVec64<N>; 3]>> = render_planned_streams(
             brdf.as_ref(),
             &surface.single,

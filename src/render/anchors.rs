@@ -22,7 +22,7 @@
 
 use super::TASK_PIXELS;
 use crate::bsdf::single::SingleBounce;
-use crate::bsdf::{differentiable, Model};
+use crate::bsdf::{differentiable, BounceCap, Model};
 use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
 use crate::scalar::{Rgb, Vec3};
 use crate::shading::ShadingRecords;
@@ -232,8 +232,8 @@ pub fn interpolation_errors(
                 fresnel: Fresnel::White,
                 height,
             };
-            let lobe =
-                differentiable::<f64>(proxy, single).expect("the proxies are analytic models");
+            let lobe = differentiable::<f64>(proxy, single, BounceCap::NONE)
+                .expect("the proxies are analytic models");
             let split = |wi: [f64; 3], wo: [f64; 3]| {
                 let mut unused = crate::albedo::rng_stream(0, 0);
                 let (s, m) = lobe.eval_split(Vec3::from_f64(wi), Vec3::from_f64(wo), &mut unused);

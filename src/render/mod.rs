@@ -271,8 +271,8 @@ pub fn render_material_streams(
     plan: &RenderPlan,
     seeds: &[u64],
 ) -> Vec<Vec<[f64; 3]>> {
-    let brdf = material.brdf();
     let single = material.single::<f64>();
+    let brdf = material.capped_brdf(plan.bounce_cap(&single));
     let diffuse = material.diffuse;
     render_planned_streams(
         brdf.as_ref(),

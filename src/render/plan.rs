@@ -9,6 +9,7 @@
 //! | `repeated` | for the stochastic models, the estimate at a sub-sample whose `(wi, wo)` repeats another's ([`super::repeated`]), when their full value is evaluated per sub-sample (`sparse-multi` off or not applicable) | none in expectation; the repeats share one estimate's noise |
 //! | `sparse-multi` | the multiple-bounce term off a grid of anchors ([`super::anchors`]) | at most [`SPARSE_TOLERANCE`] of the RMS radiance, measured on the records with proxy lobes |
 //! | `faint-multi` | the multiple-bounce term when its white albedo at the current roughness, `1 - E_avg(alpha)` (Kulla & Conty 2017, eq. 7), is below [`FAINT_TOLERANCE`] | below [`FAINT_TOLERANCE`] of the energy |
+//! | `bounce-cap` | for the stochastic models, paths of more than `K` reflections, `K` the fewest whose tail `T(K, alpha)` at the current roughness ([`crate::bsdf::bounce_tails`]: largest over incidences, white Fresnel) is at most [`BOUNCE_TOLERANCE`]; no cap where even 16 leave more | the dropped tail: below [`BOUNCE_TOLERANCE`] of the energy, a bias toward less multiple scattering |
 //!
 //! `repeated` is kept to the stochastic models because measurement says so: on an exposure
 //! bracket of copper-flash (18 photos, every pair repeated once) sharing evaluations made the
@@ -16,6 +17,16 @@
 //! more than a 29 ns evaluation) and `kulla-conty` no faster (28.0 s against 28.7 s), while an
 //! estimator costs 300-650 ns per evaluation. With `sparse-multi` on, only the cheap single
 //! term is left per sub-sample, so the plan does not look for repeats.
+//!
+//! `bounce-cap` saves little, by measurement: white walks average 1.2 reflections at alpha 0.3
+//! and 2.0-2.2 at alpha 1 (energy-weighted), while the caps are 4-5 and 7-8 reflections there
+//! (GGX), so only the rare long walks are cut. On copper at alpha 0.3 and 1.0 the criterion
+//! group `bounce_cap` of `benches/estimators.rs` timed capped and free evaluations within
+//! +-10% of each other in both directions (a shared 2-core machine; no consistent saving), and
+//! fits of `copper-flash` (128x128, alpha near 0.29) by the five estimators moved alpha by
+//! 2e-6 to 5e-4 relative (heitz, fitted by Nelder-Mead: 2e-3), at equal time per evaluation
+//! within the machine's noise. It is kept because it bounds the work of a
+//! walk at large roughness, where tails are long, at a stated cost of 1e-3 of the energy.
 //!
 //! `sparse-multi` applies to the models whose added term is an additive lobe (`kulla-conty`,
 //! `fast-msx` and the stochastic estimators); `turquin` scales the single lobe, so its added
@@ -27,8 +38,9 @@
 use super::anchors::Anchors;
 use super::repeated::Repeated;
 use crate::bsdf::albedo_table::AlbedoTable;
+use crate::bsdf::bounce_tails::BounceTails;
 use crate::bsdf::single::SingleBounce;
-use crate::bsdf::Model;
+use crate::bsdf::{BounceCap, Model};
 use crate::material::Material;
 use crate::microfacet::{Height, NdfKind};
 use crate::scalar::Real;
@@ -43,6 +55,9 @@ pub const SPARSE_TOLERANCE: f64 = 1e-3;
 /// Largest white multiple-scattering albedo that is skipped.
 pub const FAINT_TOLERANCE: f64 = 1e-3;
 
+/// Largest fraction of the white albedo carried by the paths the bounce cap drops.
+pub const BOUNCE_TOLERANCE: f64 = 1e-3;
+
 /// A skip that `--no-skip` can switch off.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
@@ -53,6 +68,8 @@ pub enum Skip {
     SparseMulti,
     /// No multiple-bounce term where its albedo is negligible.
     FaintMulti,
+    /// Walks stop after the reflections that carry all but a negligible energy.
+    BounceCap,
     /// Every skip above.
     All,
 }
@@ -63,6 +80,7 @@ pub struct Skips {
     pub repeated: bool,
     pub sparse_multi: bool,
     pub faint_multi: bool,
+    pub bounce_cap: bool,
 }
 
 impl Default for Skips {
@@ -77,6 +95,7 @@ impl Skips {
             repeated: true,
             sparse_multi: true,
             faint_multi: true,
+            bounce_cap: true,
         }
     }
 
@@ -85,6 +104,7 @@ impl Skips {
             repeated: false,
             sparse_multi: false,
             faint_multi: false,
+            bounce_cap: false,
         }
     }
 
@@ -96,6 +116,7 @@ impl Skips {
                 Skip::Repeated => skips.repeated = false,
                 Skip::SparseMulti => skips.sparse_multi = false,
                 Skip::FaintMulti => skips.faint_multi = false,
+                Skip::BounceCap => skips.bounce_cap = false,
                 Skip::All => skips = Skips::none(),
             }
         }
@@ -103,7 +124,7 @@ impl Skips {
     }
 
     pub fn any(&self) -> bool {
-        self.repeated || self.sparse_multi || self.faint_multi
+        self.repeated || self.sparse_multi || self.faint_multi || self.bounce_cap
     }
 }
 
@@ -120,6 +141,9 @@ pub struct PlanSummary {
     pub repeated_saved: usize,
     /// Roughness below which the multiple-bounce term is skipped (0: never).
     pub faint_below_alpha: f64,
+    /// Most reflections per path at the fitted roughness (`None`: no cap).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bounce_cap: Option<u32>,
 }
 
 /// How the multiple-bounce term of one render is computed.
@@ -141,6 +165,8 @@ pub struct RenderPlan {
     pub repeated: Option<Repeated>,
     /// Table whose `E_avg` decides `faint-multi`, for the models it applies to.
     faint: Option<&'static AlbedoTable>,
+    /// Table whose tails decide `bounce-cap`, for the stochastic models.
+    tails: Option<&'static BounceTails>,
 }
 
 impl RenderPlan {
@@ -152,6 +178,7 @@ impl RenderPlan {
             anchors: None,
             repeated: None,
             faint: None,
+            tails: None,
         }
     }
 
@@ -177,6 +204,10 @@ impl RenderPlan {
             anchors,
             repeated,
             faint: (skips.faint_multi && faint_model).then(|| AlbedoTable::get(ndf, height)),
+            tails: skips
+                .bounce_cap
+                .then(|| BounceTails::get(model, ndf, height))
+                .flatten(),
         }
     }
 
@@ -207,8 +238,20 @@ impl RenderPlan {
         }
     }
 
-    pub fn summary(&self) -> PlanSummary {
+    /// The bounce cap of a render at the roughness of `single`: the fewest reflections whose
+    /// tail is within [`BOUNCE_TOLERANCE`] at `max(ax, ay)` (the larger roughness has the
+    /// longer tail), or none.
+    pub fn bounce_cap<T: Real>(&self, single: &SingleBounce<T>) -> BounceCap {
+        self.tails.map_or(BounceCap::NONE, |tails| {
+            let mf = &single.microfacet;
+            tails.cap(mf.ax.re64().max(mf.ay.re64()), BOUNCE_TOLERANCE)
+        })
+    }
+
+    /// What the plan skips, with the bounce cap at the roughness of `material`.
+    pub fn summary(&self, material: &Material) -> PlanSummary {
         PlanSummary {
+            bounce_cap: self.bounce_cap(&material.single::<f64>()).get(),
             multi_stride: self.anchors.as_ref().map_or(1, |a| a.stride),
             anchors: self.anchors.as_ref().map_or(0, |a| a.points.len()),
             exact_pixels: self.anchors.as_ref().map_or(0, |a| a.exact_pixels()),

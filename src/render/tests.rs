@@ -2,9 +2,12 @@
 //! its stated bound, and does skip the work it claims to.
 
 use super::anchors::{interpolation_errors, CANDIDATE_STRIDES};
-use super::plan::{MultiTerm, RenderPlan, Skips, FAINT_TOLERANCE, SPARSE_TOLERANCE};
+use super::plan::{
+    MultiTerm, RenderPlan, Skip, Skips, BOUNCE_TOLERANCE, FAINT_TOLERANCE, SPARSE_TOLERANCE,
+};
 use super::*;
 use crate::bench::jobs::relative_rms_difference;
+use crate::bsdf::testing::ggx_material as material;
 use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::material::{FresnelSpec, Material};
@@ -35,17 +38,6 @@ fn pinhole_records(side: usize, spp: usize, bracket: bool) -> ShadingRecords {
     ShadingRecords::build(&capture, spp, false).unwrap()
 }
 
-fn material(model: Model, alpha: f64, fresnel: FresnelSpec) -> Material {
-    Material {
-        model,
-        ndf: NdfKind::Ggx,
-        height: Height::Correlated,
-        alpha: [alpha, alpha],
-        fresnel,
-        diffuse: [0.0; 3],
-    }
-}
-
 fn copper() -> FresnelSpec {
     FresnelSpec::Conductor {
         eta: [0.2378, 1.0066, 1.2404],
@@ -63,6 +55,7 @@ const SPARSE_ONLY: Skips = Skips {
     repeated: false,
     sparse_multi: true,
     faint_multi: false,
+    bounce_cap: false,
 };
 
 /// The interpolation error grows with the stride (so the choice is a real one), and the plan
@@ -152,6 +145,7 @@ fn repeated_geometry_is_shared_only_where_it_pays() {
         repeated: true,
         sparse_multi: false,
         faint_multi: false,
+        bounce_cap: false,
     };
     let walk = material(Model::Bitterli, 0.3, copper());
     let plan = RenderPlan::for_material(repeats, &walk, &records, &pixels);
@@ -184,6 +178,7 @@ fn repeated_geometry_shares_a_stochastic_estimate() {
         repeated: true,
         sparse_multi: false,
         faint_multi: false,
+        bounce_cap: false,
     };
     let plan = RenderPlan::for_material(repeats, &m, &records, &all);
     assert!(plan.repeated.is_some());
@@ -206,10 +201,11 @@ fn faint_multi_is_skipped_only_where_its_albedo_is_below_the_tolerance() {
         repeated: false,
         sparse_multi: false,
         faint_multi: true,
+        bounce_cap: false,
     };
     let kc = material(Model::KullaConty, 0.3, copper());
     let plan = RenderPlan::for_material(faint, &kc, &records, &pixels);
-    let threshold = plan.summary().faint_below_alpha;
+    let threshold = plan.summary(&kc).faint_below_alpha;
     let table = crate::bsdf::albedo_table::AlbedoTable::get(NdfKind::Ggx, Height::Correlated);
     let lost = |alpha: f64| 1.0 - table.e_avg(alpha);
     assert!(lost(threshold) < FAINT_TOLERANCE && lost(threshold * 1.01) >= FAINT_TOLERANCE);
@@ -264,7 +260,8 @@ fn sparse_renders_differentiate_exactly() {
         let mut single = m.single::<Dual64>();
         single.microfacet.ax = alpha;
         single.microfacet.ay = alpha;
-        let brdf = crate::bsdf::differentiable(model, single).unwrap();
+        let brdf =
+            crate::bsdf::differentiable(model, single, crate::bsdf::BounceCap::NONE).unwrap();
         let zero = [Dual64::from_re(0.0); 3];
         let dual = render_planned(brdf.as_ref(), &single, zero, &records, &pixels, &plan, 9);
         let h = 1e-5;
@@ -309,7 +306,7 @@ fn streams_share_the_exact_terms_and_match_separate_renders() {
         let plan = RenderPlan::for_material(skips, &m, &records, &pixels);
         let shared = render_material_streams(&m, &records, &pixels, &plan, &seeds);
         let single = m.single::<f64>();
-        let brdf = m.brdf();
+        let brdf = m.capped_brdf(plan.bounce_cap(&single));
         for (render, &seed) in shared.iter().zip(&seeds) {
             let alone = render_planned(
                 brdf.as_ref(),
@@ -331,5 +328,62 @@ fn streams_share_the_exact_terms_and_match_separate_renders() {
         let skipped = matches!(plan.multi_term(&single), MultiTerm::Skipped);
         assert_eq!(skipped, alpha < 0.01);
         assert_eq!(shared[0] == shared[1], skipped, "alpha {alpha}");
+    }
+}
+
+/// `bounce-cap`: switched off by name (`--no-skip`), a plan renders the uncapped model bit for
+/// bit; on, at roughness 1 (cap 7-8 reflections), it lowers the image by a fraction between 0
+/// and [`BOUNCE_TOLERANCE`] of its value (mean over 6 seeds, each render against the uncapped
+/// one on the same streams, within 4 standard errors of that mean; on these 2304 pixels few
+/// walks pass the cap, so the drop is often exactly 0); the cap grows with roughness.
+#[test]
+fn bounce_cap_lowers_a_render_by_at_most_its_tolerance() {
+    let records = pinhole_records(16, 1, false);
+    let pixels = lit_pixels(&records);
+    let off = Skips::except(&[
+        Skip::Repeated,
+        Skip::SparseMulti,
+        Skip::FaintMulti,
+        Skip::BounceCap,
+    ]);
+    let only_cap = Skips {
+        bounce_cap: true,
+        ..off
+    };
+    for model in [Model::Bitterli, Model::WangBdpt] {
+        let m = material(model, 1.0, copper());
+        let plan = RenderPlan::for_material(off, &m, &records, &pixels);
+        assert_eq!(
+            render_material(&m, &records, &pixels, &plan, 4),
+            render_pixels(&m, &records, &pixels, 4)
+        );
+        let plan = RenderPlan::for_material(only_cap, &m, &records, &pixels);
+        let caps: Vec<u32> = [0.05, 0.3, 1.0, 2.0]
+            .map(|alpha| {
+                let cap = plan.bounce_cap(&material(model, alpha, copper()).single::<f64>());
+                cap.get().unwrap_or(u32::MAX)
+            })
+            .to_vec();
+        assert!(
+            caps.windows(2).all(|w| w[0] <= w[1]) && caps[0] < caps[2],
+            "{caps:?}"
+        );
+        let drops: Vec<f64> = (0..6)
+            .map(|seed| {
+                let capped = render_material(&m, &records, &pixels, &plan, seed);
+                let free = render_pixels(&m, &records, &pixels, seed);
+                let sum = |image: &[[f64; 3]]| image.iter().flatten().sum::<f64>();
+                1.0 - sum(&capped) / sum(&free)
+            })
+            .collect();
+        let mean = drops.iter().sum::<f64>() / drops.len() as f64;
+        eprintln!("{model}: image lowered by {drops:?}");
+        let var = drops.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (drops.len() - 1) as f64;
+        let se = (var / drops.len() as f64).sqrt();
+        assert!(
+            mean >= -4.0 * se && mean <= BOUNCE_TOLERANCE + 4.0 * se,
+            "{model}: dropped {mean} +- {se} of the image ({drops:?}), cap {:?}",
+            plan.bounce_cap(&m.single::<f64>())
+        );
     }
 }

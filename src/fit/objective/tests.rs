@@ -273,7 +273,8 @@ fn check_pathwise(model: Model) {
                         })
                         .collect();
                     let surface = space.surface(&coords);
-                    let brdf = differentiable(model, surface.single).expect("a dual path");
+                    let brdf = differentiable(model, surface.single, crate::bsdf::BounceCap::NONE)
+                        .expect("a dual path");
                     let dual = render_model(brdf.as_ref(), surface.diffuse, &records, &pixels, 5);
                     let second = objective.seeds()[1];
                     let dual_second =
