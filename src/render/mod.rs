@@ -9,7 +9,9 @@
 //!
 //! [`render_planned`] renders through a [`plan::RenderPlan`], which skips the work a scene does
 //! not need (issue #5): fits render the same pixels hundreds of times, so the plan is built
-//! once per objective.
+//! once per objective. [`render_planned_streams`] renders several random streams at once (the
+//! pair loss of the stochastic models) and [`render_planned_split`] returns the part no stream
+//! changes separately (variable projection interpolates it across F0 nodes).
 
 pub mod anchors;
 pub mod plan;
