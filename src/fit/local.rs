@@ -221,13 +221,12 @@ pub fn search(
                 // round's starting cost on a stochastic objective (see the constants).
                 let problem = WithGradient::new(objective);
                 let stochastic = objective.is_stochastic();
-                let (mut line_search, cost_tolerance) = (MoreThuenteLineSearch::new(), 1e-13);
-                let cost_tolerance = if stochastic {
+                let mut line_search = MoreThuenteLineSearch::new();
+                let mut cost_tolerance = 1e-13;
+                if stochastic {
                     line_search = line_search.with_width_tolerance(STOCHASTIC_LINE_SEARCH_WIDTH)?;
-                    STOCHASTIC_COST_TOLERANCE * problem.cost(&start)?.abs()
-                } else {
-                    cost_tolerance
-                };
+                    cost_tolerance = STOCHASTIC_COST_TOLERANCE * problem.cost(&start)?.abs();
+                }
                 let solver = LBFGS::new(line_search, 8)
                     .with_tolerance_grad(1e-9)?
                     .with_tolerance_cost(cost_tolerance)?;
