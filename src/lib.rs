@@ -12,6 +12,7 @@
 //! - [`bench`]: run time beside error of every model, and of render and fit jobs.
 
 pub mod albedo;
+pub mod board;
 pub mod bench;
 pub mod bsdf;
 pub mod capture;

@@ -1,0 +1,171 @@
+//! Board description, printing, detection and plane geometry, each against a known truth: a
+//! board photographed by a synthetic pinhole camera at a known pose.
+
+use super::detect::detect;
+use super::geometry::*;
+use super::*;
+use nalgebra::{Rotation3, Vector3};
+
+/// A camera at `eye` looking at the board origin, rolled by `roll` radians about its axis.
+pub(crate) fn looking_at(eye: [f64; 3], roll: f64) -> Pose {
+    let eye = Vector3::from(eye);
+    let forward = (-eye).normalize();
+    let up_hint = if forward.cross(&Vector3::y()).norm() > 1e-6 { Vector3::y() } else { Vector3::x() };
+    let right = forward.cross(&up_hint).normalize();
+    let down = forward.cross(&right);
+    // Rows of the world-to-camera rotation are the camera axes (OpenCV: x right, y down).
+    let r = nalgebra::Matrix3::from_rows(&[right.transpose(), down.transpose(), forward.transpose()]);
+    let rotation = Rotation3::from_axis_angle(&Vector3::z_axis(), roll) * Rotation3::from_matrix_unchecked(r);
+    Pose { rotation, translation: -(rotation * eye) }
+}
+
+/// Greyscale photo of the printed board (white 235, black 20, window 128) by a pinhole camera,
+/// `ss` x `ss` samples per pixel: the test's own rasteriser, independent of `print`.
+pub(crate) fn photograph(board: &Board, k: &Intrinsics, pose: &Pose, size: [usize; 2], ss: usize) -> Vec<u8> {
+    let inverse = pose.rotation.inverse();
+    let center = pose.center();
+    let mut grey = Vec::with_capacity(size[0] * size[1]);
+    for r in 0..size[1] {
+        for c in 0..size[0] {
+            let mut sum = 0.0;
+            for s in 0..ss * ss {
+                let px = c as f64 + ((s % ss) as f64 + 0.5) / ss as f64;
+                let py = r as f64 + ((s / ss) as f64 + 0.5) / ss as f64;
+                let ray = inverse * Vector3::new((px - k.cx) / k.focal, (py - k.cy) / k.focal, 1.0);
+                let t = -center.z / ray.z;
+                let (x, y) = (center.x + t * ray.x, center.y + t * ray.y);
+                let e = board.extent();
+                sum += if t <= 0.0 || x < e[0] - 1.0 || x > e[1] + 1.0 || y < e[2] - 1.0 || y > e[3] + 1.0 {
+                    60.0
+                } else {
+                    match board.is_black(x, y) {
+                        Some(true) => 20.0,
+                        Some(false) => 235.0,
+                        None => 128.0,
+                    }
+                };
+            }
+            grey.push((sum / (ss * ss) as f64).round() as u8);
+        }
+    }
+    grey
+}
+
+fn board() -> Board {
+    Board::ring(10.0, 10.0, 1.6, 0.4)
+}
+
+#[test]
+fn ring_board_validates_and_round_trips_through_toml() {
+    let b = board();
+    assert!(b.tags.len() >= 16, "{} tags", b.tags.len());
+    b.validate().unwrap();
+    let back: Board = toml::from_str(&b.to_toml()).unwrap();
+    assert_eq!(back, b);
+}
+
+#[test]
+fn invalid_boards_name_the_field() {
+    let mut b = board();
+    b.tags[3].center = [0.0, 0.0];
+    assert_eq!(b.validate().unwrap_err().0, "tag[3].center");
+    let mut b = board();
+    b.tags[5].id = b.tags[2].id;
+    assert_eq!(b.validate().unwrap_err().0, "tag[5].id");
+    let mut b = board();
+    b.tag_size = f64::NAN;
+    assert_eq!(b.validate().unwrap_err().0, "tag_size");
+    let mut b = board();
+    b.tags[0].id = 600;
+    assert_eq!(b.validate().unwrap_err().0, "tag[0].id");
+}
+
+#[test]
+fn printed_board_is_read_back_by_the_detector_with_every_tag() {
+    let b = board();
+    let dpi = 150.0;
+    let (w, h, grey) = print::raster(&b, dpi).unwrap();
+    let found = detect(&b, w as usize, h as usize, grey).unwrap();
+    assert_eq!(found.len(), b.tags.len());
+    // The print is a scaled, y-flipped copy of the board frame: corners land where the layout says.
+    let dots_per_cm = dpi / 2.54;
+    let e = b.extent();
+    let margin = 2.0 * b.tag_size / 8.0;
+    for t in &found {
+        for (seen, truth) in t.corners.iter().zip(b.corners(t.id).unwrap()) {
+            let x = (truth[0] - (e[0] - margin)) * dots_per_cm;
+            let y = ((e[3] + margin) - truth[1]) * dots_per_cm;
+            assert!((seen[0] - x).abs() < 0.75 && (seen[1] - y).abs() < 0.75, "tag {} {seen:?} vs {x},{y}", t.id);
+        }
+    }
+}
+
+#[test]
+fn oblique_rolled_photos_give_corners_in_the_boards_order() {
+    let b = board();
+    let k = Intrinsics { focal: 700.0, cx: 320.0, cy: 240.0 };
+    for (eye, roll) in [([4.0, -6.0, 30.0], 0.3), ([-8.0, 3.0, 28.0], 2.0), ([2.0, 9.0, 26.0], -1.4)] {
+        let pose = looking_at(eye, roll);
+        let grey = photograph(&b, &k, &pose, [640, 480], 3);
+        let found = detect(&b, 640, 480, grey).unwrap();
+        assert!(found.len() >= b.tags.len() - 2, "{} of {} tags at {eye:?}", found.len(), b.tags.len());
+        // A wrong corner order or a half-pixel convention error shows as a bias; a single
+        // corner of a ~37 px tag is good to about half a pixel.
+        let (mut bias, mut n) = ([0.0; 2], 0.0);
+        for t in &found {
+            for (seen, truth) in t.corners.iter().zip(b.corners(t.id).unwrap()) {
+                let q = pose.project(&k, truth).unwrap();
+                let d = ((seen[0] - q[0]).powi(2) + (seen[1] - q[1]).powi(2)).sqrt();
+                assert!(d < 1.0, "tag {} corner off by {d:.2} px at {eye:?}", t.id);
+                bias = [bias[0] + seen[0] - q[0], bias[1] + seen[1] - q[1]];
+                n += 1.0;
+            }
+        }
+        assert!(bias.iter().all(|b| (b / n).abs() < 0.1), "mean offset {bias:?} / {n}");
+    }
+}
+
+fn correspondences(b: &Board, k: &Intrinsics, pose: &Pose, noise: f64, seed: u64) -> Vec<Correspondence> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    b.tags
+        .iter()
+        .flat_map(|t| b.corners(t.id).unwrap())
+        .map(|board| {
+            let q = pose.project(k, board).unwrap();
+            let jitter = [rng.random_range(-noise..=noise), rng.random_range(-noise..=noise)];
+            Correspondence { board, image: [q[0] + jitter[0], q[1] + jitter[1]] }
+        })
+        .collect()
+}
+
+#[test]
+fn homography_focal_and_pose_recover_a_known_camera() {
+    let b = board();
+    let truth_k = Intrinsics { focal: 1500.0, cx: 960.0, cy: 720.0 };
+    let eyes = [[5.0, -8.0, 30.0], [-9.0, 2.0, 27.0], [1.0, 10.0, 32.0], [7.0, 7.0, 29.0]];
+    let poses: Vec<Pose> = eyes.iter().enumerate().map(|(i, &e)| looking_at(e, 0.4 * i as f64)).collect();
+    let sets: Vec<_> = poses.iter().enumerate().map(|(i, p)| correspondences(&b, &truth_k, p, 0.3, i as u64)).collect();
+    let hs: Vec<_> = sets.iter().map(|s| homography(s).unwrap()).collect();
+    let focal = focal_from_homographies(&hs, truth_k.cx, truth_k.cy).unwrap();
+    assert!((focal / truth_k.focal - 1.0).abs() < 0.01, "focal {focal}");
+    let k = Intrinsics { focal, ..truth_k };
+    for ((h, set), (truth, eye)) in hs.iter().zip(&sets).zip(poses.iter().zip(eyes)) {
+        let pose = refine_pose(pose_from_homography(h, &k).unwrap(), &k, set);
+        let c = pose.center();
+        let distance = Vector3::from(eye).norm();
+        assert!((c - Vector3::from(eye)).norm() < 0.01 * distance, "centre {c:?} vs {eye:?}");
+        assert!(pose.rms_error(&k, set) < 0.6, "rms {}", pose.rms_error(&k, set));
+        assert!(truth.rms_error(&k, set) < 0.6);
+    }
+}
+
+#[test]
+fn degenerate_correspondences_have_no_homography() {
+    let line: Vec<Correspondence> = (0..6)
+        .map(|i| Correspondence { board: [i as f64, 2.0 * i as f64], image: [10.0 * i as f64, 3.0] })
+        .collect();
+    assert!(homography(&line).is_none());
+    assert!(homography(&line[..3]).is_none());
+}
+
