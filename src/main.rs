@@ -28,6 +28,10 @@ enum Command {
     Synth(commands::synth::SynthArgs),
     /// Re-render a photo set with a material or fit.
     Render(commands::synth::RenderArgs),
+    /// Write a printable tag board (PNG, SVG) and its board.toml for phone captures.
+    Board(commands::capture::BoardArgs),
+    /// Phone photos of a sample in a printed board -> a photo set (rectified or perspective).
+    Capture(commands::capture::CaptureArgs),
     /// Fit material parameters to a photo set.
     Fit(commands::fit::FitArgs),
     /// Write a fit or material for a renderer (json, mitsuba, gltf, materialx).
@@ -52,6 +56,8 @@ fn main() -> ExitCode {
         Command::Lobe(args) => commands::lobe::run_lobe(args),
         Command::Synth(args) => commands::synth::run_synth(args),
         Command::Render(args) => commands::synth::run_render(args),
+        Command::Board(args) => commands::capture::run_board(args),
+        Command::Capture(args) => commands::capture::run_capture(args),
         Command::Fit(args) => commands::fit::run_fit(args),
         Command::Export(args) => commands::export::run_export(args),
         Command::Compare(args) => commands::compare::run_compare(args),

@@ -31,9 +31,7 @@ pub fn detect(board: &Board, width: usize, height: usize, grey: Vec<u8>) -> Resu
     let detector_error = |e: &dyn std::fmt::Display| Error::argument("detector", e.to_string());
     let size = ImageSize { width, height };
     let image = Image::<u8, 1>::new(size, grey).map_err(|e| detector_error(&e))?;
-    let mut config = DecodeTagsConfig::new(vec![kind]).map_err(|e| detector_error(&e))?;
-    // Full resolution: the quad corners of a decimated image are coarser than a pixel.
-    config.downscale_factor = 1;
+    let config = DecodeTagsConfig::new(vec![kind]).map_err(|e| detector_error(&e))?;
     let mut decoder = AprilTagDecoder::new(config, size).map_err(|e| detector_error(&e))?;
     let detections = decoder.decode(&image).map_err(|e| detector_error(&e))?;
     let mut found: Vec<TagCorners> = detections

@@ -23,6 +23,8 @@
 
 pub mod detect;
 pub mod geometry;
+pub mod paper;
+pub mod phone;
 pub mod print;
 pub mod tags;
 

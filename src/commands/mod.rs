@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod brdf;
+pub mod capture;
 pub mod compare;
 pub mod export;
 pub mod fit;

@@ -35,16 +35,26 @@ pub struct SynthArgs {
     /// Replace a non-empty output folder.
     #[arg(long)]
     pub force: bool,
-    /// Output format: `exr` (linear EXR + capture.toml) or `materialgan` (8-bit gamma-2.2 PNGs
-    /// clipped at 1, with camera_pos.txt, light_pos.txt, light_power.txt, image_size.txt).
+    /// Output format: `exr` (linear EXR + capture.toml), `materialgan` (8-bit gamma-2.2 PNGs
+    /// clipped at 1, with camera_pos.txt, light_pos.txt, light_power.txt, image_size.txt), or
+    /// `phone` (8-bit sRGB JPEGs as a phone writes them, the gain that maps the brightest
+    /// 0.5% to 0.9 recorded as each photo's `exposure` in capture.toml).
     #[arg(long, value_enum, default_value = "exr")]
     pub format: SynthFormat,
+    /// A printed tag board (board.toml) around the sample: its paper and tags are rendered
+    /// where the cameras see the board plane outside the sample (for `bouncefit capture`).
+    #[arg(long)]
+    pub board: Option<PathBuf>,
+    /// JPEG quality of `--format phone`.
+    #[arg(long, default_value_t = 92)]
+    pub jpeg_quality: u8,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum SynthFormat {
     Exr,
     Materialgan,
+    Phone,
 }
 
 #[derive(clap::Args, Debug)]
@@ -82,6 +92,13 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
     let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
     let folder = StagedFolder::new(&args.output, args.force)?;
     let mut pixels = render_all(&material, &records, args.seed);
+    if let Some(board) = &args.board {
+        let board = crate::board::Board::load(board)?;
+        let paper = crate::board::paper::paper_radiance(&board, &capture, args.pixel_samples);
+        for (p, q) in pixels.iter_mut().zip(paper) {
+            *p = std::array::from_fn(|i| p[i] + q[i]);
+        }
+    }
     if args.noise > 0.0 {
         for (p, v) in pixels.iter_mut().enumerate() {
             let mut rng = rng_stream(args.seed ^ 0x6E6F_6973_6500_0000, p as u64);
@@ -102,18 +119,30 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
         );
         return Ok(());
     }
-    write_photo_images(
-        &staging_root,
-        &records,
-        &pixels,
-        display_exposure(&pixels),
-        "",
-    )?;
     let mut synthetic = capture.clone();
     synthetic.root = staging_root.clone();
+    if args.format == SynthFormat::Phone {
+        let gain = 0.9 * display_exposure(&pixels);
+        write_phone_jpegs(&staging_root, &records, &pixels, gain, args.jpeg_quality)?;
+        for photo in &mut synthetic.photos {
+            photo.image = PathBuf::from(format!("{}.jpg", photo.stem()));
+            photo.color = ColorEncoding::Srgb;
+            photo.exposure *= gain;
+        }
+    } else {
+        write_photo_images(
+            &staging_root,
+            &records,
+            &pixels,
+            display_exposure(&pixels),
+            "",
+        )?;
+        for photo in &mut synthetic.photos {
+            photo.image = PathBuf::from(format!("{}.exr", photo.stem()));
+            photo.color = ColorEncoding::Linear;
+        }
+    }
     for photo in &mut synthetic.photos {
-        photo.image = PathBuf::from(format!("{}.exr", photo.stem()));
-        photo.color = ColorEncoding::Linear;
         photo.mask = None;
         photo.saturated_mask = None;
     }
@@ -130,6 +159,24 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
         records.photos[0].height,
         args.output.display()
     );
+    Ok(())
+}
+
+/// `<stem>.jpg` per photo: linear radiance times `gain`, clipped at 1, sRGB-encoded to 8 bits.
+fn write_phone_jpegs(folder: &std::path::Path, records: &ShadingRecords, pixels: &[[f64; 3]], gain: f64, quality: u8) -> Result<()> {
+    use crate::capture::image_io::linear_to_srgb;
+    for photo in &records.photos {
+        let bytes: Vec<u8> = pixels[photo.pixels()]
+            .iter()
+            .flat_map(|v| v.map(|c| (linear_to_srgb((c * gain).clamp(0.0, 1.0)) * 255.0).round() as u8))
+            .collect();
+        let path = folder.join(format!("{}.jpg", photo.stem));
+        crate::capture::atomic_file::write_atomically(&path, |w| {
+            image::codecs::jpeg::JpegEncoder::new_with_quality(w, quality)
+                .encode(&bytes, photo.width as u32, photo.height as u32, image::ExtendedColorType::Rgb8)
+                .map_err(|e| Error::io(&path, e))
+        })?;
+    }
     Ok(())
 }
 

@@ -1,0 +1,301 @@
+//! `bouncefit board` (write a printable tag board and its BOARD.toml) and `bouncefit capture`
+//! (phone photos of a sample in that board -> a photo set; issue #18, [`crate::board::phone`]).
+
+use super::output::StagedFolder;
+use crate::board::phone::{self, FocalSource, PhonePhoto};
+use crate::board::{print, Board};
+use crate::capture::atomic_file::write_atomically;
+use crate::capture::camera::{Camera, Pinhole, Rectified};
+use crate::capture::image_io::{srgb_to_linear, write_exr, ColorEncoding};
+use crate::capture::light::Light;
+use crate::capture::{Capture, Photo, Sample};
+use crate::error::{Error, Result};
+use glam::DVec3;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args, Debug)]
+pub struct BoardArgs {
+    /// Output folder: board.toml, board.png (at --dpi) and board.svg (true size).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Sample window WIDTH,HEIGHT in cm.
+    #[arg(long, default_value = "10,10", value_parser = parse_pair)]
+    pub window: [f64; 2],
+    /// Side of a tag's black square, cm.
+    #[arg(long, default_value_t = 1.6)]
+    pub tag_size: f64,
+    /// Gap between tags and between the tags and the window, cm.
+    #[arg(long, default_value_t = 0.4)]
+    pub gap: f64,
+    /// Resolution of board.png, dots per inch.
+    #[arg(long, default_value_t = 300.0)]
+    pub dpi: f64,
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct CaptureArgs {
+    /// Phone photos (JPEG or PNG, sRGB) of the sample lying in the board's window, flash on.
+    #[arg(required = true)]
+    pub photos: Vec<PathBuf>,
+    /// The board description (`bouncefit board` writes one).
+    #[arg(long)]
+    pub board: PathBuf,
+    /// Output photo-set folder (capture.toml, images, masks, capture-report.json).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Rectified image size in pixels (square window: N; else the longer side).
+    #[arg(long, default_value_t = 256)]
+    pub resolution: usize,
+    /// Keep the original perspective photos with pinhole cameras instead of rectifying.
+    #[arg(long)]
+    pub perspective: bool,
+    /// Focal length in pixels (overrides EXIF; without either it is estimated from the board).
+    #[arg(long)]
+    pub focal_px: Option<f64>,
+    /// The flash's position relative to the lens in the camera frame (x right, y down, z
+    /// forward), board units.
+    #[arg(long, default_value = "0,0,0", value_parser = parse_triple)]
+    pub flash_offset: [f64; 3],
+    /// Radiant intensity of the flash (RGB, W/sr in board units; a scale the fit's
+    /// --fit-exposure absorbs when unknown).
+    #[arg(long, default_value = "1,1,1", value_parser = parse_triple)]
+    pub flash_intensity: [f64; 3],
+    #[arg(long)]
+    pub force: bool,
+}
+
+fn parse_numbers<const N: usize>(text: &str) -> std::result::Result<[f64; N], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("'{v}': {e}")))
+        .collect::<std::result::Result<_, _>>()?;
+    let values: [f64; N] = values
+        .try_into()
+        .map_err(|_| format!("expected {N} comma-separated numbers, got '{text}'"))?;
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(values)
+    } else {
+        Err(format!("'{text}' has a number that is not finite"))
+    }
+}
+
+fn parse_pair(text: &str) -> std::result::Result<[f64; 2], String> {
+    parse_numbers(text)
+}
+
+fn parse_triple(text: &str) -> std::result::Result<[f64; 3], String> {
+    parse_numbers(text)
+}
+
+pub fn run_board(args: &BoardArgs) -> Result<()> {
+    let board = Board::ring(args.window[0], args.window[1], args.tag_size, args.gap);
+    board
+        .validate()
+        .map_err(|(field, message)| Error::argument(format!("--{}", field.replace('_', "-")), message))?;
+    let folder = StagedFolder::new(&args.output, args.force)?;
+    let toml_path = folder.path("board.toml");
+    write_atomically(&toml_path, |w| {
+        std::io::Write::write_all(w, board.to_toml().as_bytes()).map_err(|e| Error::io(&toml_path, e))
+    })?;
+    print::write_png(&board, args.dpi, &folder.path("board.png"))?;
+    print::write_svg(&board, &folder.path("board.svg"))?;
+    folder.commit()?;
+    let e = board.extent();
+    eprintln!(
+        "wrote a board of {} tags, {:.1} x {:.1} cm printed ({} dpi PNG, true-size SVG), to {}",
+        board.tags.len(),
+        e[1] - e[0],
+        e[3] - e[2],
+        args.dpi,
+        args.output.display()
+    );
+    Ok(())
+}
+
+/// Focal length in pixels from EXIF `FocalLengthIn35mmFilm` (35 mm equivalent: the full frame's
+/// 43.27 mm diagonal spans the image diagonal), if present.
+fn exif_focal_px(path: &Path, width: usize, height: usize) -> Option<f64> {
+    let file = std::fs::File::open(path).ok()?;
+    let exif = exif::Reader::new().read_from_container(&mut std::io::BufReader::new(file)).ok()?;
+    let field = exif.get_field(exif::Tag::FocalLengthIn35mmFilm, exif::In::PRIMARY)?;
+    let f35 = f64::from(field.value.get_uint(0)?);
+    let diagonal_px = ((width * width + height * height) as f64).sqrt();
+    (f35 > 0.0).then(|| f35 * diagonal_px / 36.0f64.hypot(24.0))
+}
+
+/// Reads a photo upright (EXIF orientation applied), linearised from sRGB.
+fn read_photo(path: &Path) -> Result<PhonePhoto> {
+    use image::ImageDecoder;
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
+    let mut decoder = reader.into_decoder().map_err(|e| Error::invalid(path, "image", e.to_string()))?;
+    let orientation = decoder.orientation().unwrap_or(image::metadata::Orientation::NoTransforms);
+    let mut image = image::DynamicImage::from_decoder(decoder).map_err(|e| Error::invalid(path, "image", e.to_string()))?;
+    image.apply_orientation(orientation);
+    let rgb = image.to_rgb8();
+    let (width, height) = (rgb.width() as usize, rgb.height() as usize);
+    let table: Vec<f32> = (0..=255).map(|v| srgb_to_linear(f64::from(v) / 255.0) as f32).collect();
+    let linear = rgb.pixels().map(|p| p.0.map(|v| table[usize::from(v)])).collect();
+    let clipped = clipped_pixels(&rgb);
+    let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    Ok(PhonePhoto { name, width, height, linear, clipped, exif_focal_px: exif_focal_px(path, width, height) })
+}
+
+/// A mask PNG: 255 where `nonzero`, else 0.
+/// Smallest 8-bit value treated as clipped: JPEG's block transform rings around a clipped
+/// highlight, so values just below 255 next to it are not radiance either.
+const CLIPPED_FROM: u8 = 250;
+
+/// Pixels within one pixel of a channel at or above [`CLIPPED_FROM`].
+fn clipped_pixels(rgb: &image::RgbImage) -> Vec<bool> {
+    let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+    let high: Vec<bool> = rgb.pixels().map(|p| p.0.iter().any(|&v| v >= CLIPPED_FROM)).collect();
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            (y.saturating_sub(1)..(y + 2).min(h)).any(|yy| (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| high[yy * w + xx]))
+        })
+        .collect()
+}
+
+fn write_mask(path: &Path, nonzero: &[bool], width: usize, height: usize) -> Result<()> {
+    let bytes = nonzero.iter().map(|&k| if k { 255 } else { 0 }).collect();
+    let image = image::GrayImage::from_raw(width as u32, height as u32, bytes).expect("mask size");
+    write_atomically(path, |w| {
+        image::DynamicImage::ImageLuma8(image).write_to(w, image::ImageFormat::Png).map_err(|e| Error::io(path, e))
+    })
+}
+
+pub fn run_capture(args: &CaptureArgs) -> Result<()> {
+    let board = Board::load(&args.board)?;
+    if args.resolution < 8 || args.resolution > 8192 {
+        return Err(Error::argument("--resolution", format!("must be 8 to 8192, got {}", args.resolution)));
+    }
+    if let Some(f) = args.focal_px.filter(|f| !(f.is_finite() && *f > 0.0)) {
+        return Err(Error::argument("--focal-px", format!("must be a positive length, got {f}")));
+    }
+    let photos: Vec<PhonePhoto> = args.photos.iter().map(|p| read_photo(p)).collect::<Result<_>>()?;
+    if let Some(p) = photos.iter().find(|p| (p.width, p.height) != (photos[0].width, photos[0].height)) {
+        return Err(Error::invalid(&args.photos[photos.iter().position(|q| std::ptr::eq(q, p)).unwrap()], "size",
+            format!("{}x{}, but the first photo is {}x{}: one phone, one resolution", p.width, p.height, photos[0].width, photos[0].height)));
+    }
+    let located = phone::locate(&board, &photos, args.focal_px, args.flash_offset);
+    for r in &located.reports {
+        match &r.left_out {
+            Some(why) => eprintln!("{}: left out: {why}", r.name),
+            None => eprintln!("{}: {} tags, reprojection {:.2} px", r.name, r.tags_found, r.rms_px.unwrap_or(f64::NAN)),
+        }
+    }
+    if located.photos.len() < phone::MIN_PHOTOS {
+        return Err(Error::argument(
+            "photos",
+            format!("{} of {} photos usable, {} needed (see the reasons above)", located.photos.len(), photos.len(), phone::MIN_PHOTOS),
+        ));
+    }
+    let folder = StagedFolder::new(&args.output, args.force)?;
+    let (w, h) = (board.window.width, board.window.height);
+    let resolution = if w >= h {
+        [args.resolution, ((args.resolution as f64 * h / w).round() as usize).max(1)]
+    } else {
+        [((args.resolution as f64 * w / h).round() as usize).max(1), args.resolution]
+    };
+    let k = located.intrinsics;
+    let mut capture_photos = Vec::new();
+    for found in &located.photos {
+        let photo = &photos[found.index];
+        let pose = &found.pose;
+        let c = pose.center();
+        let flash = phone::flash_position(pose, args.flash_offset);
+        let light = Light::Point { position: DVec3::new(flash.x, flash.y, flash.z), intensity: args.flash_intensity };
+        let stem = format!("{:02}", capture_photos.len());
+        let (camera, rgb, keep, saturated, size) = if args.perspective {
+            let inverse = pose.rotation.inverse();
+            let forward = inverse * nalgebra::Vector3::z();
+            let up = -(inverse * nalgebra::Vector3::y());
+            let camera = Camera::Pinhole(Pinhole {
+                position: DVec3::new(c.x, c.y, c.z),
+                look_at: DVec3::new(c.x + forward.x, c.y + forward.y, c.z + forward.z),
+                up: DVec3::new(up.x, up.y, up.z),
+                fx: k.focal,
+                fy: k.focal,
+                cx: k.cx,
+                cy: k.cy,
+                resolution: [photo.width, photo.height],
+            });
+            (camera, photo.linear.clone(), vec![true; photo.width * photo.height], photo.clipped.clone(), [photo.width, photo.height])
+        } else {
+            // Enough reads per output pixel to average every photo pixel it covers.
+            let corners = [[-w / 2.0, h / 2.0], [w / 2.0, h / 2.0], [w / 2.0, -h / 2.0], [-w / 2.0, -h / 2.0]];
+            let q: Vec<[f64; 2]> = corners.iter().filter_map(|&p| pose.project(&k, p)).collect();
+            let span = q.iter().zip(q.iter().cycle().skip(1)).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).fold(0.0, f64::max);
+            let ss = ((span / resolution[0] as f64).ceil() as usize).clamp(2, 16);
+            let rectified = phone::rectify(&board, photo, &k, pose, resolution, ss);
+            let camera = Camera::Rectified(Rectified { position: DVec3::new(c.x, c.y, c.z), resolution });
+            (camera, rectified.rgb, rectified.keep, rectified.saturated, resolution)
+        };
+        write_exr(&folder.path(&format!("{stem}.exr")), &rgb, size[0], size[1])?;
+        let mask = if args.perspective {
+            // Pixels that do not see the sample window are outside the sample anyway; a mask
+            // is only needed where the photo itself ends.
+            None
+        } else if keep.iter().all(|&k| k) {
+            None
+        } else {
+            write_mask(&folder.path(&format!("{stem}_mask.png")), &keep, size[0], size[1])?;
+            Some(PathBuf::from(format!("{stem}_mask.png")))
+        };
+        // Clipped photo pixels carry no radiance: the fit leaves them out (nonzero = saturated).
+        let saturated_mask = if saturated.iter().any(|&s| s) {
+            let name = format!("{stem}_saturated_mask.png");
+            write_mask(&folder.path(&name), &saturated, size[0], size[1])?;
+            Some(PathBuf::from(name))
+        } else {
+            None
+        };
+        capture_photos.push(Photo {
+            image: PathBuf::from(format!("{stem}.exr")),
+            camera,
+            light,
+            exposure: 1.0,
+            weight: 1.0,
+            mask,
+            saturated_mask,
+            color: ColorEncoding::Linear,
+        });
+    }
+    let capture = Capture {
+        name: args.output.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "capture".into()),
+        units: board.units.clone(),
+        root: folder.path(""),
+        sample: Sample { width: w, height: h },
+        color: None,
+        depth: 0.0,
+        photos: capture_photos,
+        warnings: Vec::new(),
+    };
+    capture.save_manifest(&folder.path("capture.toml"))?;
+    let report = serde_json::json!({
+        "focal_px": k.focal,
+        "focal_source": match located.focal_source { FocalSource::Given => "given", FocalSource::Exif => "exif", FocalSource::Board => "board" },
+        "principal_point": [k.cx, k.cy],
+        "photos": located.reports,
+        "sources": args.photos,
+    });
+    let report_path = folder.path("capture-report.json");
+    write_atomically(&report_path, |wr| serde_json::to_writer_pretty(&mut *wr, &report).map_err(|e| Error::io(&report_path, e)))?;
+    folder.commit()?;
+    eprintln!(
+        "wrote {} of {} photos ({}) to {}; focal {:.1} px ({:?})",
+        located.photos.len(),
+        photos.len(),
+        if args.perspective { "perspective".to_string() } else { format!("rectified {}x{}", resolution[0], resolution[1]) },
+        args.output.display(),
+        k.focal,
+        located.focal_source
+    );
+    Ok(())
+}

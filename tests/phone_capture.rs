@@ -1,0 +1,143 @@
+//! `bouncefit board` + `bouncefit capture` against synthetic truth (issue #18): phone photos
+//! rendered by `synth --board --format phone` (perspective, flash at the lens, 8-bit sRGB JPEG,
+//! 1% noise) are turned into a photo set whose cameras, images and fit match the truth.
+
+mod common;
+
+use bouncefit::capture::image_io::{load_image, load_mask, ColorEncoding};
+use common::*;
+use std::path::Path;
+
+const MATERIAL: &str = "datasets/sources/copper-a03.material.json";
+const PHONE: &str = "datasets/sources/phone-board.capture.toml";
+
+/// `(position, exposure, intensity)` of every photo of a manifest, read by the library.
+fn cameras(manifest: &Path) -> Vec<([f64; 3], f64)> {
+    let capture = bouncefit::capture::Capture::open(manifest).unwrap();
+    capture.photos.iter().map(|p| (p.camera.position().to_array(), p.exposure)).collect()
+}
+
+/// The phone template's cameras as a rectified set at 256 x 256: what an ideal capture gives.
+fn ideal_manifest(dir: &Path) -> std::path::PathBuf {
+    let mut text = String::from(
+        "name = \"ideal\"\nunits = \"cm\"\n[sample]\nwidth = 10.0\nheight = 10.0\n\
+         [camera]\nmodel = \"rectified\"\nposition = [0.0, 0.0, 30.0]\nresolution = [256, 256]\n",
+    );
+    for (i, (p, _)) in cameras(&repo(PHONE)).iter().enumerate() {
+        text += &format!(
+            "[[photo]]\nimage = \"{i:02}.exr\"\ncamera = {{ position = [{}, {}, {}] }}\n\
+             light = {{ kind = \"flash\", intensity = [600.0, 600.0, 600.0] }}\n",
+            p[0], p[1], p[2]
+        );
+    }
+    let path = dir.join("ideal.capture.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let (board, photos, set, ideal) = (dir.path().join("board"), dir.path().join("photos"), dir.path().join("set"), dir.path().join("ideal"));
+    run_ok(&["board", "-o", board.to_str().unwrap(), "--dpi", "100"]);
+    assert_eq!(folder_entries(&board), ["board.png", "board.svg", "board.toml"]);
+    let board_toml = board.join("board.toml");
+    synth(&repo(MATERIAL), &repo(PHONE), &photos, &["--board", board_toml.to_str().unwrap(), "--format", "phone", "--noise", "0.01"]);
+    let truth = cameras(&photos.join("capture.toml"));
+    let gain = truth[0].1;
+    let intensity = format!("{0},{0},{0}", 600.0 * gain);
+    let jpegs: Vec<String> = (0..9).map(|i| photos.join(format!("{i:02}.jpg")).to_str().unwrap().to_owned()).collect();
+    let mut args = vec!["capture", "--board", board_toml.to_str().unwrap(), "-o", set.to_str().unwrap(), "--flash-intensity", &intensity];
+    args.extend(jpegs.iter().map(String::as_str));
+    run_ok(&args);
+
+    // Cameras: focal length (truth: fov 50 degrees over 600 px) and centres within 1%.
+    let report = read_json(&set.join("capture-report.json"));
+    let focal_truth = 300.0 / 25f64.to_radians().tan();
+    let focal = report["focal_px"].as_f64().unwrap();
+    assert!((focal / focal_truth - 1.0).abs() < 0.01, "focal {focal} vs {focal_truth}");
+    assert_eq!(report["focal_source"], "board");
+    let found = cameras(&set.join("capture.toml"));
+    assert_eq!(found.len(), 9);
+    for ((seen, _), (truth, _)) in found.iter().zip(&truth) {
+        let error = (0..3).map(|i| (seen[i] - truth[i]).powi(2)).sum::<f64>().sqrt();
+        let distance = truth.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!(error < 0.01 * distance, "camera {seen:?} vs {truth:?}");
+    }
+
+    // Images: the rectified photos, divided by the phone's gain, against the ideal rectified
+    // render, over the pixels the capture keeps (not clipped, not at the window's edge).
+    synth(&repo(MATERIAL), &ideal_manifest(dir.path()), &ideal, &[]);
+    for i in 0..9 {
+        let got = load_image(&set.join(format!("{i:02}.exr")), ColorEncoding::Linear).unwrap();
+        let want = load_image(&ideal.join(format!("{i:02}.exr")), ColorEncoding::Linear).unwrap();
+        let mask = |name: String, keep_nonzero: bool| {
+            let path = set.join(name);
+            path.exists().then(|| load_mask(&path, 256, 256).unwrap().into_iter().map(|v| v == keep_nonzero).collect::<Vec<bool>>())
+        };
+        let keep = mask(format!("{i:02}_mask.png"), true);
+        let unclipped = mask(format!("{i:02}_saturated_mask.png"), false);
+        let (mut error, mut signal, mut kept) = (0.0, 0.0, 0usize);
+        for p in 0..256 * 256 {
+            if keep.as_ref().is_some_and(|k| !k[p]) || unclipped.as_ref().is_some_and(|u| !u[p]) {
+                continue;
+            }
+            kept += 1;
+            for c in 0..3 {
+                let (g, w) = (f64::from(got.rgb[p][c]) / gain, f64::from(want.rgb[p][c]));
+                error += (g - w).powi(2);
+                signal += w * w;
+            }
+        }
+        let relative = (error / signal).sqrt();
+        // The frontal photo clips over half the sample in its highlight (as a phone would).
+        assert!(kept > 256 * 256 / 4, "photo {i}: only {kept} pixels kept");
+        assert!(relative < 0.01, "photo {i}: rectified relative RMSE {relative:.4}");
+    }
+
+    // The fit of the captured set lands where the fit of the ideal set does.
+    let out = tempfile::tempdir().unwrap();
+    let captured = fit_json(&set, &[], out.path());
+    let ideal_fit = fit_json(&ideal, &[], out.path());
+    let (a, b) = (captured["alpha"][0].as_f64().unwrap(), ideal_fit["alpha"][0].as_f64().unwrap());
+    assert!((a / b - 1.0).abs() < 0.01, "alpha {a} vs ideal {b}");
+    let (f, g) = (triple(&captured["f0"]), triple(&ideal_fit["f0"]));
+    assert!((0..3).all(|c| (f[c] - g[c]).abs() < 0.01), "F0 {f:?} vs ideal {g:?}");
+}
+
+#[test]
+fn photos_without_tags_or_flash_are_left_out_by_name_and_too_few_refuse() {
+    let dir = tempfile::tempdir().unwrap();
+    let (board, photos) = (dir.path().join("board"), dir.path().join("photos"));
+    run_ok(&["board", "-o", board.to_str().unwrap(), "--dpi", "50"]);
+    // 00: a good flash photo; 01: lit by the sun instead of the flash; 02: so close that no
+    // tag is in the frame.
+    let manifest = dir.path().join("bad.capture.toml");
+    std::fs::write(
+        &manifest,
+        "name = \"bad\"\nunits = \"cm\"\n[sample]\nwidth = 10.0\nheight = 10.0\n\
+         [camera]\nmodel = \"pinhole\"\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 1.0, 0.0]\nfov_y_deg = 50.0\nresolution = [400, 300]\n\
+         [[photo]]\nimage = \"00.jpg\"\ncamera = { position = [2.0, -3.0, 30.0] }\nlight = { kind = \"flash\", intensity = [600.0, 600.0, 600.0] }\n\
+         [[photo]]\nimage = \"01.jpg\"\ncamera = { position = [-3.0, 2.0, 29.0] }\nlight = { kind = \"directional\", direction = [0.3, 0.2, 1.0], irradiance = [1.0, 1.0, 1.0] }\n\
+         [[photo]]\nimage = \"02.jpg\"\ncamera = { position = [0.0, 0.0, 6.0] }\nlight = { kind = \"flash\", intensity = [600.0, 600.0, 600.0] }\n",
+    )
+    .unwrap();
+    let board_toml = board.join("board.toml");
+    synth(&repo(MATERIAL), &manifest, &photos, &["--board", board_toml.to_str().unwrap(), "--format", "phone"]);
+    let set = dir.path().join("set");
+    let jpeg = |i: usize| photos.join(format!("{i:02}.jpg")).to_str().unwrap().to_owned();
+    let (a, b, c) = (jpeg(0), jpeg(1), jpeg(2));
+    let stderr = run_bad(&["capture", &a, &b, &c, "--board", board_toml.to_str().unwrap(), "-o", set.to_str().unwrap(), "--focal-px", "321.7"]);
+    assert!(stderr.contains("01: left out: the flash explains"), "{stderr}");
+    assert!(stderr.contains("02: left out: 0 of the board's tags found"), "{stderr}");
+    assert!(stderr.contains("1 of 3 photos usable, 3 needed"), "{stderr}");
+    assert!(!set.exists(), "nothing is written when the run refuses");
+
+    // Bad board files name the file and the field.
+    let broken = dir.path().join("broken.toml");
+    std::fs::write(&broken, std::fs::read_to_string(&board_toml).unwrap().replacen("tag_size = 1.6", "tag_size = -1.0", 1)).unwrap();
+    let stderr = run_bad(&["capture", &a, "--board", broken.to_str().unwrap(), "-o", set.to_str().unwrap()]);
+    assert!(stderr.contains("broken.toml: tag_size"), "{stderr}");
+    let stderr = run_bad(&["capture", "/nonexistent/x.jpg", "--board", board_toml.to_str().unwrap(), "-o", set.to_str().unwrap()]);
+    assert!(stderr.contains("/nonexistent/x.jpg"), "{stderr}");
+}
