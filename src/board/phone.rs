@@ -74,6 +74,13 @@ pub struct PhotoReport {
     pub flash_share: Option<f64>,
     /// Why the photo was left out; `None` when it is used.
     pub left_out: Option<String>,
+    /// The detected tags: id and corners in image pixels, in the board's corner order.
+    pub tags: Vec<(u16, [[f64; 2]; 4])>,
+    /// Board plane to image, `image ~ H (x, y, 1)`, rows.
+    pub homography: Option<[[f64; 3]; 3]>,
+    /// The pose as `cv2.solvePnP` gives it: rotation vector (radians) and translation.
+    pub rotation_vector: Option<[f64; 3]>,
+    pub translation: Option<[f64; 3]>,
 }
 
 /// A photo that passed, with its camera.
@@ -116,12 +123,17 @@ pub fn locate(
             camera: None,
             flash_share: None,
             left_out: None,
+            tags: Vec::new(),
+            homography: None,
+            rotation_vector: None,
+            translation: None,
         })
         .collect();
     let mut seen: Vec<(usize, Vec<Correspondence>, Matrix3<f64>)> = Vec::new();
     for (i, photo) in photos.iter().enumerate() {
         let tags = detect(board, photo.width, photo.height, photo.grey()).unwrap_or_default();
         reports[i].tags_found = tags.len();
+        reports[i].tags = tags.iter().map(|t| (t.id, t.corners)).collect();
         if tags.len() < MIN_TAGS {
             reports[i].left_out = Some(format!(
                 "{} of the board's tags found, {MIN_TAGS} needed (out of frame or out of focus?)",
@@ -131,7 +143,10 @@ pub fn locate(
         }
         let points = correspondences(board, &tags);
         match homography(&points) {
-            Some(h) => seen.push((i, points, h)),
+            Some(h) => {
+                reports[i].homography = Some(std::array::from_fn(|r| std::array::from_fn(|c| h[(r, c)])));
+                seen.push((i, points, h));
+            }
             None => reports[i].left_out = Some("the tags' corners are degenerate".into()),
         }
     }
@@ -166,6 +181,9 @@ pub fn locate(
         let c = pose.center();
         report.rms_px = Some(rms);
         report.camera = Some([c.x, c.y, c.z]);
+        let rv = pose.rotation.scaled_axis();
+        report.rotation_vector = Some([rv.x, rv.y, rv.z]);
+        report.translation = Some([pose.translation.x, pose.translation.y, pose.translation.z]);
         if rms > MAX_RMS_PX {
             report.left_out = Some(format!("reprojection error {rms:.2} px > {MAX_RMS_PX} px (board blurred or not flat?)"));
             continue;
