@@ -26,6 +26,8 @@ pub mod fast_msx;
 pub mod heitz;
 pub mod kulla_conty;
 pub mod lobe_mixture;
+#[cfg(test)]
+mod published_quirks;
 mod position_free;
 #[cfg(test)]
 mod properties;
