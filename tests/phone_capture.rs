@@ -141,3 +141,81 @@ fn photos_without_tags_or_flash_are_left_out_by_name_and_too_few_refuse() {
     let stderr = run_bad(&["capture", "/nonexistent/x.jpg", "--board", board_toml.to_str().unwrap(), "-o", set.to_str().unwrap()]);
     assert!(stderr.contains("/nonexistent/x.jpg"), "{stderr}");
 }
+
+/// `jpeg` with an EXIF block (APP1) holding `FocalLengthIn35mmFilm` and `Orientation`.
+fn with_exif(jpeg: &[u8], focal_35mm: u16, orientation: u16) -> Vec<u8> {
+    use exif::{experimental::Writer, Field, In, Tag, Value};
+    let fields = [
+        Field { tag: Tag::FocalLengthIn35mmFilm, ifd_num: In::PRIMARY, value: Value::Short(vec![focal_35mm]) },
+        Field { tag: Tag::Orientation, ifd_num: In::PRIMARY, value: Value::Short(vec![orientation]) },
+    ];
+    let mut writer = Writer::new();
+    fields.iter().for_each(|f| writer.push_field(f));
+    let mut tiff = std::io::Cursor::new(Vec::new());
+    writer.write(&mut tiff, false).unwrap();
+    let tiff = tiff.into_inner();
+    let mut out = jpeg[..2].to_vec(); // SOI
+    out.extend_from_slice(&[0xFF, 0xE1]);
+    out.extend_from_slice(&((tiff.len() + 8) as u16).to_be_bytes());
+    out.extend_from_slice(b"Exif\0\0");
+    out.extend_from_slice(&tiff);
+    out.extend_from_slice(&jpeg[2..]);
+    out
+}
+
+#[test]
+fn exif_focal_length_and_orientation_are_read() {
+    // A phone whose 35 mm equivalent focal length is 26 mm, 400x300 photos: f = 26 * 500 / 43.27 px.
+    let focal = 26.0 * 500.0 / 36f64.hypot(24.0);
+    let fov = 2.0 * (150.0 / focal).atan().to_degrees();
+    let dir = tempfile::tempdir().unwrap();
+    let (board, photos) = (dir.path().join("board"), dir.path().join("photos"));
+    run_ok(&["board", "-o", board.to_str().unwrap(), "--dpi", "50"]);
+    let manifest = dir.path().join("phone.capture.toml");
+    let mut text = format!(
+        "name = \"exif\"\nunits = \"cm\"\n[sample]\nwidth = 10.0\nheight = 10.0\n\
+         [camera]\nmodel = \"pinhole\"\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 1.0, 0.0]\nfov_y_deg = {fov}\nresolution = [400, 300]\n"
+    );
+    for (i, p) in [[3.0, -4.0, 26.0], [-5.0, 2.0, 25.0], [1.0, 6.0, 27.0]].iter().enumerate() {
+        text += &format!(
+            "[[photo]]\nimage = \"{i:02}.jpg\"\ncamera = {{ position = [{}, {}, {}] }}\nlight = {{ kind = \"flash\", intensity = [600.0, 600.0, 600.0] }}\n",
+            p[0], p[1], p[2]
+        );
+    }
+    std::fs::write(&manifest, text).unwrap();
+    let board_toml = board.join("board.toml");
+    synth(&repo(MATERIAL), &manifest, &photos, &["--board", board_toml.to_str().unwrap(), "--format", "phone"]);
+    // Photo 01 is stored turned a quarter counter-clockwise, tagged "rotate 90 clockwise to view".
+    let tagged: Vec<String> = (0..3)
+        .map(|i| {
+            let source = photos.join(format!("{i:02}.jpg"));
+            let mut jpeg = std::fs::read(&source).unwrap();
+            let orientation = if i == 1 {
+                let turned = image::load_from_memory(&jpeg).unwrap().rotate270();
+                let mut buffer = std::io::Cursor::new(Vec::new());
+                turned.write_to(&mut buffer, image::ImageFormat::Jpeg).unwrap();
+                jpeg = buffer.into_inner();
+                6
+            } else {
+                1
+            };
+            let path = dir.path().join(format!("tagged{i}.jpg"));
+            std::fs::write(&path, with_exif(&jpeg, 26, orientation)).unwrap();
+            path.to_str().unwrap().to_owned()
+        })
+        .collect();
+    let set = dir.path().join("set");
+    let mut args = vec!["capture", "--board", board_toml.to_str().unwrap(), "-o", set.to_str().unwrap()];
+    args.extend(tagged.iter().map(String::as_str));
+    run_ok(&args);
+    let report = read_json(&set.join("capture-report.json"));
+    assert_eq!(report["focal_source"], "exif");
+    assert!((report["focal_px"].as_f64().unwrap() / focal - 1.0).abs() < 1e-9);
+    let truth = cameras(&manifest);
+    let found = cameras(&set.join("capture.toml"));
+    assert_eq!(found.len(), 3, "the turned photo is read upright and kept");
+    for ((seen, _), (want, _)) in found.iter().zip(&truth) {
+        let error = (0..3).map(|i| (seen[i] - want[i]).powi(2)).sum::<f64>().sqrt();
+        assert!(error < 0.01 * 26.0, "camera {seen:?} vs {want:?}");
+    }
+}
