@@ -287,11 +287,7 @@ impl Cui<f64> {
 
 impl Brdf for Cui<f64> {
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
-        let (single, multi) = self.eval_split(wi, wo, rng);
-        BrdfValue {
-            single: single.0,
-            multi: multi.0,
-        }
+        self.eval_split(wi, wo, rng).into()
     }
 
     fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {

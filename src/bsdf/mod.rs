@@ -83,6 +83,16 @@ pub struct BrdfValue {
     pub multi: [f64; 3],
 }
 
+impl From<(Rgb<f64>, Rgb<f64>)> for BrdfValue {
+    /// The `(single, multi)` split of [`ScalarBrdf::eval_split`].
+    fn from((single, multi): (Rgb<f64>, Rgb<f64>)) -> Self {
+        BrdfValue {
+            single: single.0,
+            multi: multi.0,
+        }
+    }
+}
+
 impl BrdfValue {
     pub fn total(&self) -> [f64; 3] {
         [0, 1, 2].map(|c| self.single[c] + self.multi[c])

@@ -56,11 +56,7 @@ impl Wang<f64> {
 
 impl Brdf for Wang<f64> {
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
-        let (single, multi) = self.eval_split(wi, wo, rng);
-        BrdfValue {
-            single: single.0,
-            multi: multi.0,
-        }
+        self.eval_split(wi, wo, rng).into()
     }
 
     /// The analog random walk of sec. 4.3: reflect about a visible normal, then leave with the
