@@ -59,6 +59,10 @@ fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
     assert_eq!(report["focal_source"], "board");
     let found = cameras(&set.join("capture.toml"));
     assert_eq!(found.len(), 9);
+    // MaterialGAN's pair by default: the set at 256 pixels, and at 1024 in a subfolder.
+    let hi = bouncefit::capture::Capture::open(&set.join("1024")).unwrap();
+    assert_eq!(hi.photos[0].camera.resolution(), [1024, 1024]);
+    assert_eq!(cameras(&set.join("1024").join("capture.toml")), found);
     for ((seen, _), (truth, _)) in found.iter().zip(&truth) {
         let error = (0..3).map(|i| (seen[i] - truth[i]).powi(2)).sum::<f64>().sqrt();
         let distance = truth.iter().map(|v| v * v).sum::<f64>().sqrt();

@@ -45,9 +45,11 @@ pub struct CaptureArgs {
     /// Output photo-set folder (capture.toml, images, masks, capture-report.json).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Rectified image size in pixels (square window: N; else the longer side).
-    #[arg(long, default_value_t = 256)]
-    pub resolution: usize,
+    /// Rectified image sizes in pixels (the window's longer side): the first is the photo set
+    /// in the output folder, each further one a photo set in a subfolder named by its size
+    /// (MaterialGAN's pair by default: OUT/ at 256, OUT/1024/).
+    #[arg(long, default_value = "256,1024", value_delimiter = ',', num_args = 1..)]
+    pub resolution: Vec<usize>,
     /// Keep the original perspective photos with pinhole cameras instead of rectifying.
     #[arg(long)]
     pub perspective: bool,
@@ -170,38 +172,14 @@ fn write_mask(path: &Path, nonzero: &[bool], width: usize, height: usize) -> Res
     })
 }
 
-pub fn run_capture(args: &CaptureArgs) -> Result<()> {
-    let board = Board::load(&args.board)?;
-    if args.resolution < 8 || args.resolution > 8192 {
-        return Err(Error::argument("--resolution", format!("must be 8 to 8192, got {}", args.resolution)));
-    }
-    if let Some(f) = args.focal_px.filter(|f| !(f.is_finite() && *f > 0.0)) {
-        return Err(Error::argument("--focal-px", format!("must be a positive length, got {f}")));
-    }
-    let photos: Vec<PhonePhoto> = args.photos.iter().map(|p| read_photo(p)).collect::<Result<_>>()?;
-    if let Some(p) = photos.iter().find(|p| (p.width, p.height) != (photos[0].width, photos[0].height)) {
-        return Err(Error::invalid(&args.photos[photos.iter().position(|q| std::ptr::eq(q, p)).unwrap()], "size",
-            format!("{}x{}, but the first photo is {}x{}: one phone, one resolution", p.width, p.height, photos[0].width, photos[0].height)));
-    }
-    let located = phone::locate(&board, &photos, args.focal_px, args.flash_offset);
-    for r in &located.reports {
-        match &r.left_out {
-            Some(why) => eprintln!("{}: left out: {why}", r.name),
-            None => eprintln!("{}: {} tags, reprojection {:.2} px", r.name, r.tags_found, r.rms_px.unwrap_or(f64::NAN)),
-        }
-    }
-    if located.photos.len() < phone::MIN_PHOTOS {
-        return Err(Error::argument(
-            "photos",
-            format!("{} of {} photos usable, {} needed (see the reasons above)", located.photos.len(), photos.len(), phone::MIN_PHOTOS),
-        ));
-    }
-    let folder = StagedFolder::new(&args.output, args.force)?;
+/// Writes the photo set of the located photos into `dir`: rectified at `longer` pixels along
+/// the window's longer side, or the perspective photos.
+fn write_photo_set(dir: &Path, name: &str, board: &Board, photos: &[PhonePhoto], located: &phone::Located3d, args: &CaptureArgs, longer: usize) -> Result<()> {
     let (w, h) = (board.window.width, board.window.height);
     let resolution = if w >= h {
-        [args.resolution, ((args.resolution as f64 * h / w).round() as usize).max(1)]
+        [longer, ((longer as f64 * h / w).round() as usize).max(1)]
     } else {
-        [((args.resolution as f64 * w / h).round() as usize).max(1), args.resolution]
+        [((longer as f64 * w / h).round() as usize).max(1), longer]
     };
     let k = located.intrinsics;
     let mut capture_photos = Vec::new();
@@ -237,7 +215,7 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
             let camera = Camera::Rectified(Rectified { position: DVec3::new(c.x, c.y, c.z), resolution });
             (camera, rectified.rgb, rectified.keep, rectified.saturated, resolution)
         };
-        write_exr(&folder.path(&format!("{stem}.exr")), &rgb, size[0], size[1])?;
+        write_exr(&dir.join(&format!("{stem}.exr")), &rgb, size[0], size[1])?;
         let mask = if args.perspective {
             // Pixels that do not see the sample window are outside the sample anyway; a mask
             // is only needed where the photo itself ends.
@@ -245,13 +223,13 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
         } else if keep.iter().all(|&k| k) {
             None
         } else {
-            write_mask(&folder.path(&format!("{stem}_mask.png")), &keep, size[0], size[1])?;
+            write_mask(&dir.join(&format!("{stem}_mask.png")), &keep, size[0], size[1])?;
             Some(PathBuf::from(format!("{stem}_mask.png")))
         };
         // Clipped photo pixels carry no radiance: the fit leaves them out (nonzero = saturated).
         let saturated_mask = if saturated.iter().any(|&s| s) {
             let name = format!("{stem}_saturated_mask.png");
-            write_mask(&folder.path(&name), &saturated, size[0], size[1])?;
+            write_mask(&dir.join(&name), &saturated, size[0], size[1])?;
             Some(PathBuf::from(name))
         } else {
             None
@@ -268,16 +246,56 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
         });
     }
     let capture = Capture {
-        name: args.output.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "capture".into()),
+        name: name.to_owned(),
         units: board.units.clone(),
-        root: folder.path(""),
+        root: dir.to_path_buf(),
         sample: Sample { width: w, height: h },
         color: None,
         depth: 0.0,
         photos: capture_photos,
         warnings: Vec::new(),
     };
-    capture.save_manifest(&folder.path("capture.toml"))?;
+    capture.save_manifest(&dir.join("capture.toml"))
+}
+
+pub fn run_capture(args: &CaptureArgs) -> Result<()> {
+    let board = Board::load(&args.board)?;
+    if let Some(n) = args.resolution.iter().find(|n| !(8..=8192).contains(*n)) {
+        return Err(Error::argument("--resolution", format!("must be 8 to 8192, got {n}")));
+    }
+    if args.resolution.is_empty() {
+        return Err(Error::argument("--resolution", "give at least one size"));
+    }
+    if let Some(f) = args.focal_px.filter(|f| !(f.is_finite() && *f > 0.0)) {
+        return Err(Error::argument("--focal-px", format!("must be a positive length, got {f}")));
+    }
+    let photos: Vec<PhonePhoto> = args.photos.iter().map(|p| read_photo(p)).collect::<Result<_>>()?;
+    if let Some(p) = photos.iter().find(|p| (p.width, p.height) != (photos[0].width, photos[0].height)) {
+        return Err(Error::invalid(&args.photos[photos.iter().position(|q| std::ptr::eq(q, p)).unwrap()], "size",
+            format!("{}x{}, but the first photo is {}x{}: one phone, one resolution", p.width, p.height, photos[0].width, photos[0].height)));
+    }
+    let located = phone::locate(&board, &photos, args.focal_px, args.flash_offset);
+    for r in &located.reports {
+        match &r.left_out {
+            Some(why) => eprintln!("{}: left out: {why}", r.name),
+            None => eprintln!("{}: {} tags, reprojection {:.2} px", r.name, r.tags_found, r.rms_px.unwrap_or(f64::NAN)),
+        }
+    }
+    if located.photos.len() < phone::MIN_PHOTOS {
+        return Err(Error::argument(
+            "photos",
+            format!("{} of {} photos usable, {} needed (see the reasons above)", located.photos.len(), photos.len(), phone::MIN_PHOTOS),
+        ));
+    }
+    let folder = StagedFolder::new(&args.output, args.force)?;
+    let name = args.output.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "capture".into());
+    let sizes: &[usize] = if args.perspective { &args.resolution[..1] } else { &args.resolution };
+    for (i, &longer) in sizes.iter().enumerate() {
+        let dir = if i == 0 { folder.path("") } else { folder.path(&longer.to_string()) };
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&args.output, e))?;
+        write_photo_set(&dir, &name, &board, &photos, &located, args, longer)?;
+    }
+    let k = located.intrinsics;
     let report = serde_json::json!({
         "focal_px": k.focal,
         "focal_source": match located.focal_source { FocalSource::Given => "given", FocalSource::Exif => "exif", FocalSource::Board => "board" },
@@ -292,7 +310,7 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
         "wrote {} of {} photos ({}) to {}; focal {:.1} px ({:?})",
         located.photos.len(),
         photos.len(),
-        if args.perspective { "perspective".to_string() } else { format!("rectified {}x{}", resolution[0], resolution[1]) },
+        if args.perspective { "perspective".to_string() } else { format!("rectified at {:?} px", sizes) },
         args.output.display(),
         k.focal,
         located.focal_source
