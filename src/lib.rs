@@ -12,8 +12,8 @@
 //! - [`bench`]: run time beside error of every model, and of render and fit jobs.
 
 pub mod albedo;
-pub mod board;
 pub mod bench;
+pub mod board;
 pub mod bsdf;
 pub mod capture;
 pub mod commands;

@@ -14,7 +14,11 @@ const PHONE: &str = "datasets/sources/phone-board.capture.toml";
 /// `(position, exposure, intensity)` of every photo of a manifest, read by the library.
 fn cameras(manifest: &Path) -> Vec<([f64; 3], f64)> {
     let capture = bouncefit::capture::Capture::open(manifest).unwrap();
-    capture.photos.iter().map(|p| (p.camera.position().to_array(), p.exposure)).collect()
+    capture
+        .photos
+        .iter()
+        .map(|p| (p.camera.position().to_array(), p.exposure))
+        .collect()
 }
 
 /// The phone template's cameras as a rectified set at 256 x 256: what an ideal capture gives.
@@ -38,16 +42,52 @@ fn ideal_manifest(dir: &Path) -> std::path::PathBuf {
 #[test]
 fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
     let dir = tempfile::tempdir().unwrap();
-    let (board, photos, set, ideal) = (dir.path().join("board"), dir.path().join("photos"), dir.path().join("set"), dir.path().join("ideal"));
+    let (board, photos, set, ideal) = (
+        dir.path().join("board"),
+        dir.path().join("photos"),
+        dir.path().join("set"),
+        dir.path().join("ideal"),
+    );
     run_ok(&["board", "-o", board.to_str().unwrap(), "--dpi", "100"]);
-    assert_eq!(folder_entries(&board), ["board.png", "board.svg", "board.toml"]);
+    assert_eq!(
+        folder_entries(&board),
+        ["board.png", "board.svg", "board.toml"]
+    );
     let board_toml = board.join("board.toml");
-    synth(&repo(MATERIAL), &repo(PHONE), &photos, &["--board", board_toml.to_str().unwrap(), "--format", "phone", "--noise", "0.01"]);
+    synth(
+        &repo(MATERIAL),
+        &repo(PHONE),
+        &photos,
+        &[
+            "--board",
+            board_toml.to_str().unwrap(),
+            "--format",
+            "phone",
+            "--noise",
+            "0.01",
+        ],
+    );
     let truth = cameras(&photos.join("capture.toml"));
     let gain = truth[0].1;
     let intensity = format!("{0},{0},{0}", 600.0 * gain);
-    let jpegs: Vec<String> = (0..9).map(|i| photos.join(format!("{i:02}.jpg")).to_str().unwrap().to_owned()).collect();
-    let mut args = vec!["capture", "--board", board_toml.to_str().unwrap(), "-o", set.to_str().unwrap(), "--flash-intensity", &intensity];
+    let jpegs: Vec<String> = (0..9)
+        .map(|i| {
+            photos
+                .join(format!("{i:02}.jpg"))
+                .to_str()
+                .unwrap()
+                .to_owned()
+        })
+        .collect();
+    let mut args = vec![
+        "capture",
+        "--board",
+        board_toml.to_str().unwrap(),
+        "-o",
+        set.to_str().unwrap(),
+        "--flash-intensity",
+        &intensity,
+    ];
     args.extend(jpegs.iter().map(String::as_str));
     run_ok(&args);
 
@@ -55,7 +95,10 @@ fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
     let report = read_json(&set.join("capture-report.json"));
     let focal_truth = 300.0 / 25f64.to_radians().tan();
     let focal = report["focal_px"].as_f64().unwrap();
-    assert!((focal / focal_truth - 1.0).abs() < 0.01, "focal {focal} vs {focal_truth}");
+    assert!(
+        (focal / focal_truth - 1.0).abs() < 0.01,
+        "focal {focal} vs {focal_truth}"
+    );
     assert_eq!(report["focal_source"], "board");
     let found = cameras(&set.join("capture.toml"));
     assert_eq!(found.len(), 9);
@@ -64,7 +107,10 @@ fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
     assert_eq!(hi.photos[0].camera.resolution(), [1024, 1024]);
     assert_eq!(cameras(&set.join("1024").join("capture.toml")), found);
     for ((seen, _), (truth, _)) in found.iter().zip(&truth) {
-        let error = (0..3).map(|i| (seen[i] - truth[i]).powi(2)).sum::<f64>().sqrt();
+        let error = (0..3)
+            .map(|i| (seen[i] - truth[i]).powi(2))
+            .sum::<f64>()
+            .sqrt();
         let distance = truth.iter().map(|v| v * v).sum::<f64>().sqrt();
         assert!(error < 0.01 * distance, "camera {seen:?} vs {truth:?}");
     }
@@ -77,7 +123,13 @@ fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
         let want = load_image(&ideal.join(format!("{i:02}.exr")), ColorEncoding::Linear).unwrap();
         let mask = |name: String, keep_nonzero: bool| {
             let path = set.join(name);
-            path.exists().then(|| load_mask(&path, 256, 256).unwrap().into_iter().map(|v| v == keep_nonzero).collect::<Vec<bool>>())
+            path.exists().then(|| {
+                load_mask(&path, 256, 256)
+                    .unwrap()
+                    .into_iter()
+                    .map(|v| v == keep_nonzero)
+                    .collect::<Vec<bool>>()
+            })
         };
         let keep = mask(format!("{i:02}_mask.png"), true);
         let unclipped = mask(format!("{i:02}_saturated_mask.png"), false);
@@ -96,17 +148,26 @@ fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
         let relative = (error / signal).sqrt();
         // The frontal photo clips over half the sample in its highlight (as a phone would).
         assert!(kept > 256 * 256 / 4, "photo {i}: only {kept} pixels kept");
-        assert!(relative < 0.01, "photo {i}: rectified relative RMSE {relative:.4}");
+        assert!(
+            relative < 0.01,
+            "photo {i}: rectified relative RMSE {relative:.4}"
+        );
     }
 
     // The fit of the captured set lands where the fit of the ideal set does.
     let out = tempfile::tempdir().unwrap();
     let captured = fit_json(&set, &[], out.path());
     let ideal_fit = fit_json(&ideal, &[], out.path());
-    let (a, b) = (captured["alpha"][0].as_f64().unwrap(), ideal_fit["alpha"][0].as_f64().unwrap());
+    let (a, b) = (
+        captured["alpha"][0].as_f64().unwrap(),
+        ideal_fit["alpha"][0].as_f64().unwrap(),
+    );
     assert!((a / b - 1.0).abs() < 0.01, "alpha {a} vs ideal {b}");
     let (f, g) = (triple(&captured["f0"]), triple(&ideal_fit["f0"]));
-    assert!((0..3).all(|c| (f[c] - g[c]).abs() < 0.01), "F0 {f:?} vs ideal {g:?}");
+    assert!(
+        (0..3).all(|c| (f[c] - g[c]).abs() < 0.01),
+        "F0 {f:?} vs ideal {g:?}"
+    );
 }
 
 #[test]
@@ -127,22 +188,75 @@ fn photos_without_tags_or_flash_are_left_out_by_name_and_too_few_refuse() {
     )
     .unwrap();
     let board_toml = board.join("board.toml");
-    synth(&repo(MATERIAL), &manifest, &photos, &["--board", board_toml.to_str().unwrap(), "--format", "phone"]);
+    synth(
+        &repo(MATERIAL),
+        &manifest,
+        &photos,
+        &["--board", board_toml.to_str().unwrap(), "--format", "phone"],
+    );
     let set = dir.path().join("set");
-    let jpeg = |i: usize| photos.join(format!("{i:02}.jpg")).to_str().unwrap().to_owned();
+    let jpeg = |i: usize| {
+        photos
+            .join(format!("{i:02}.jpg"))
+            .to_str()
+            .unwrap()
+            .to_owned()
+    };
     let (a, b, c) = (jpeg(0), jpeg(1), jpeg(2));
-    let stderr = run_bad(&["capture", &a, &b, &c, "--board", board_toml.to_str().unwrap(), "-o", set.to_str().unwrap(), "--focal-px", "321.7"]);
-    assert!(stderr.contains("01: left out: the flash explains"), "{stderr}");
-    assert!(stderr.contains("02: left out: 0 of the board's tags found"), "{stderr}");
-    assert!(stderr.contains("1 of 3 photos usable, 3 needed"), "{stderr}");
+    let stderr = run_bad(&[
+        "capture",
+        &a,
+        &b,
+        &c,
+        "--board",
+        board_toml.to_str().unwrap(),
+        "-o",
+        set.to_str().unwrap(),
+        "--focal-px",
+        "321.7",
+    ]);
+    assert!(
+        stderr.contains("01: left out: the flash explains"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("02: left out: 0 of the board's tags found"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("1 of 3 photos usable, 3 needed"),
+        "{stderr}"
+    );
     assert!(!set.exists(), "nothing is written when the run refuses");
 
     // Bad board files name the file and the field.
     let broken = dir.path().join("broken.toml");
-    std::fs::write(&broken, std::fs::read_to_string(&board_toml).unwrap().replacen("tag_size = 1.6", "tag_size = -1.0", 1)).unwrap();
-    let stderr = run_bad(&["capture", &a, "--board", broken.to_str().unwrap(), "-o", set.to_str().unwrap()]);
+    std::fs::write(
+        &broken,
+        std::fs::read_to_string(&board_toml).unwrap().replacen(
+            "tag_size = 1.6",
+            "tag_size = -1.0",
+            1,
+        ),
+    )
+    .unwrap();
+    let stderr = run_bad(&[
+        "capture",
+        &a,
+        "--board",
+        broken.to_str().unwrap(),
+        "-o",
+        set.to_str().unwrap(),
+    ]);
     assert!(stderr.contains("broken.toml: tag_size"), "{stderr}");
-    let stderr = run_bad(&["capture", "/nonexistent/x.jpg", "--board", board_toml.to_str().unwrap(), "-o", set.to_str().unwrap()]);
+    let stderr = run_bad(&[
+        "capture",
+        "/nonexistent/x.jpg",
+        "--board",
+        board_toml.to_str().unwrap(),
+        "-o",
+        set.to_str().unwrap(),
+    ]);
     assert!(stderr.contains("/nonexistent/x.jpg"), "{stderr}");
 }
 
@@ -150,8 +264,16 @@ fn photos_without_tags_or_flash_are_left_out_by_name_and_too_few_refuse() {
 fn with_exif(jpeg: &[u8], focal_35mm: u16, orientation: u16) -> Vec<u8> {
     use exif::{experimental::Writer, Field, In, Tag, Value};
     let fields = [
-        Field { tag: Tag::FocalLengthIn35mmFilm, ifd_num: In::PRIMARY, value: Value::Short(vec![focal_35mm]) },
-        Field { tag: Tag::Orientation, ifd_num: In::PRIMARY, value: Value::Short(vec![orientation]) },
+        Field {
+            tag: Tag::FocalLengthIn35mmFilm,
+            ifd_num: In::PRIMARY,
+            value: Value::Short(vec![focal_35mm]),
+        },
+        Field {
+            tag: Tag::Orientation,
+            ifd_num: In::PRIMARY,
+            value: Value::Short(vec![orientation]),
+        },
     ];
     let mut writer = Writer::new();
     fields.iter().for_each(|f| writer.push_field(f));
@@ -180,7 +302,10 @@ fn exif_focal_length_and_orientation_are_read() {
         "name = \"exif\"\nunits = \"cm\"\n[sample]\nwidth = 10.0\nheight = 10.0\n\
          [camera]\nmodel = \"pinhole\"\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 1.0, 0.0]\nfov_y_deg = {fov}\nresolution = [400, 300]\n"
     );
-    for (i, p) in [[3.0, -4.0, 26.0], [-5.0, 2.0, 25.0], [1.0, 6.0, 27.0]].iter().enumerate() {
+    for (i, p) in [[3.0, -4.0, 26.0], [-5.0, 2.0, 25.0], [1.0, 6.0, 27.0]]
+        .iter()
+        .enumerate()
+    {
         text += &format!(
             "[[photo]]\nimage = \"{i:02}.jpg\"\ncamera = {{ position = [{}, {}, {}] }}\nlight = {{ kind = \"flash\", intensity = [600.0, 600.0, 600.0] }}\n",
             p[0], p[1], p[2]
@@ -188,7 +313,12 @@ fn exif_focal_length_and_orientation_are_read() {
     }
     std::fs::write(&manifest, text).unwrap();
     let board_toml = board.join("board.toml");
-    synth(&repo(MATERIAL), &manifest, &photos, &["--board", board_toml.to_str().unwrap(), "--format", "phone"]);
+    synth(
+        &repo(MATERIAL),
+        &manifest,
+        &photos,
+        &["--board", board_toml.to_str().unwrap(), "--format", "phone"],
+    );
     // Photo 01 is stored turned a quarter counter-clockwise, tagged "rotate 90 clockwise to view".
     let tagged: Vec<String> = (0..3)
         .map(|i| {
@@ -197,7 +327,9 @@ fn exif_focal_length_and_orientation_are_read() {
             let orientation = if i == 1 {
                 let turned = image::load_from_memory(&jpeg).unwrap().rotate270();
                 let mut buffer = std::io::Cursor::new(Vec::new());
-                turned.write_to(&mut buffer, image::ImageFormat::Jpeg).unwrap();
+                turned
+                    .write_to(&mut buffer, image::ImageFormat::Jpeg)
+                    .unwrap();
                 jpeg = buffer.into_inner();
                 6
             } else {
@@ -209,7 +341,13 @@ fn exif_focal_length_and_orientation_are_read() {
         })
         .collect();
     let set = dir.path().join("set");
-    let mut args = vec!["capture", "--board", board_toml.to_str().unwrap(), "-o", set.to_str().unwrap()];
+    let mut args = vec![
+        "capture",
+        "--board",
+        board_toml.to_str().unwrap(),
+        "-o",
+        set.to_str().unwrap(),
+    ];
     args.extend(tagged.iter().map(String::as_str));
     run_ok(&args);
     let report = read_json(&set.join("capture-report.json"));
@@ -219,7 +357,10 @@ fn exif_focal_length_and_orientation_are_read() {
     let found = cameras(&set.join("capture.toml"));
     assert_eq!(found.len(), 3, "the turned photo is read upright and kept");
     for ((seen, _), (want, _)) in found.iter().zip(&truth) {
-        let error = (0..3).map(|i| (seen[i] - want[i]).powi(2)).sum::<f64>().sqrt();
+        let error = (0..3)
+            .map(|i| (seen[i] - want[i]).powi(2))
+            .sum::<f64>()
+            .sqrt();
         assert!(error < 0.01 * 26.0, "camera {seen:?} vs {want:?}");
     }
 }

@@ -24,7 +24,12 @@ pub struct TagCorners {
 
 /// The tags of `board` found in an 8-bit greyscale image (`width` x `height`, row-major),
 /// sorted by id; tags not on the board and repeated ids are dropped.
-pub fn detect(board: &Board, width: usize, height: usize, grey: Vec<u8>) -> Result<Vec<TagCorners>> {
+pub fn detect(
+    board: &Board,
+    width: usize,
+    height: usize,
+    grey: Vec<u8>,
+) -> Result<Vec<TagCorners>> {
     let kind = match board.family {
         TagFamilyName::Tag36h11 => TagFamilyKind::Tag36H11,
     };

@@ -27,7 +27,9 @@ pub struct Intrinsics {
 
 impl Intrinsics {
     fn matrix(&self) -> Matrix3<f64> {
-        Matrix3::new(self.focal, 0.0, self.cx, 0.0, self.focal, self.cy, 0.0, 0.0, 1.0)
+        Matrix3::new(
+            self.focal, 0.0, self.cx, 0.0, self.focal, self.cy, 0.0, 0.0, 1.0,
+        )
     }
 }
 
@@ -66,8 +68,13 @@ impl Pose {
 /// Similarity that moves `points` to their centroid and scales their mean distance to sqrt(2).
 fn normaliser(points: impl Iterator<Item = [f64; 2]> + Clone) -> Matrix3<f64> {
     let n = points.clone().count() as f64;
-    let (mx, my) = points.clone().fold((0.0, 0.0), |(a, b), p| (a + p[0] / n, b + p[1] / n));
-    let spread = points.map(|p| ((p[0] - mx).powi(2) + (p[1] - my).powi(2)).sqrt()).sum::<f64>() / n;
+    let (mx, my) = points
+        .clone()
+        .fold((0.0, 0.0), |(a, b), p| (a + p[0] / n, b + p[1] / n));
+    let spread = points
+        .map(|p| ((p[0] - mx).powi(2) + (p[1] - my).powi(2)).sqrt())
+        .sum::<f64>()
+        / n;
     let s = std::f64::consts::SQRT_2 / spread.max(1e-300);
     Matrix3::new(s, 0.0, -s * mx, 0.0, s, -s * my, 0.0, 0.0, 1.0)
 }
@@ -132,7 +139,10 @@ pub fn focal_from_homographies(homographies: &[Matrix3<f64>], cx: f64, cy: f64) 
         // (a1 a2 + b1 b2) u + c1 c2 = 0 and (a1^2 + b1^2 - a2^2 - b2^2) u + c1^2 - c2^2 = 0.
         let rows = [
             (c1.x * c2.x + c1.y * c2.y, c1.z * c2.z),
-            (c1.x * c1.x + c1.y * c1.y - c2.x * c2.x - c2.y * c2.y, c1.z * c1.z - c2.z * c2.z),
+            (
+                c1.x * c1.x + c1.y * c1.y - c2.x * c2.x - c2.y * c2.y,
+                c1.z * c1.z - c2.z * c2.z,
+            ),
         ];
         for (a, b) in rows {
             aa += a * a;
@@ -155,7 +165,7 @@ pub fn pose_from_homography(h: &Matrix3<f64>, k: &Intrinsics) -> Option<Pose> {
         m.column(1) * lambda * sign,
         m.column(2) * lambda * sign,
     );
-    let r = Matrix3::from_columns(&[r1.into(), r2.into(), r1.cross(&r2)]);
+    let r = Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]);
     let svd = r.svd(true, true);
     let mut rotation = svd.u? * svd.v_t?;
     if rotation.determinant() < 0.0 {
@@ -163,7 +173,7 @@ pub fn pose_from_homography(h: &Matrix3<f64>, k: &Intrinsics) -> Option<Pose> {
     }
     Some(Pose {
         rotation: Rotation3::from_matrix_unchecked(rotation),
-        translation: t.into(),
+        translation: t,
     })
 }
 
@@ -185,8 +195,17 @@ pub fn refine_pose(pose: Pose, k: &Intrinsics, points: &[Correspondence]) -> Pos
         Some(r)
     };
     let rv = pose.rotation.scaled_axis();
-    let mut p = [rv.x, rv.y, rv.z, pose.translation.x, pose.translation.y, pose.translation.z];
-    let Some(mut r) = residuals(&p) else { return pose };
+    let mut p = [
+        rv.x,
+        rv.y,
+        rv.z,
+        pose.translation.x,
+        pose.translation.y,
+        pose.translation.z,
+    ];
+    let Some(mut r) = residuals(&p) else {
+        return pose;
+    };
     let cost = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
     let mut damping = 1e-3;
     for _ in 0..50 {
@@ -196,7 +215,9 @@ pub fn refine_pose(pose: Pose, k: &Intrinsics, points: &[Correspondence]) -> Pos
             let step = if j < 3 { 1e-7 } else { 1e-7 * scale };
             let mut q = p;
             q[j] += step;
-            let Some(rq) = residuals(&q) else { return unpack(&p) };
+            let Some(rq) = residuals(&q) else {
+                return unpack(&p);
+            };
             for i in 0..r.len() {
                 jac[(i, j)] = (rq[i] - r[i]) / step;
             }
@@ -210,7 +231,9 @@ pub fn refine_pose(pose: Pose, k: &Intrinsics, points: &[Correspondence]) -> Pos
             for d in 0..6 {
                 a[(d, d)] += damping * jtj[(d, d)].max(1e-12);
             }
-            let Some(delta) = a.lu().solve(&(-&g)) else { break };
+            let Some(delta) = a.lu().solve(&(-&g)) else {
+                break;
+            };
             let mut q = p;
             for d in 0..6 {
                 q[d] += delta[d];

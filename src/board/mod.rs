@@ -76,7 +76,10 @@ impl Board {
     /// order (top row left to right, then down the sides, then the bottom row).
     pub fn ring(width: f64, height: f64, tag_size: f64, gap: f64) -> Board {
         let pitch = tag_size + gap;
-        let (hx, hy) = (width / 2.0 + gap + tag_size / 2.0, height / 2.0 + gap + tag_size / 2.0);
+        let (hx, hy) = (
+            width / 2.0 + gap + tag_size / 2.0,
+            height / 2.0 + gap + tag_size / 2.0,
+        );
         // Tags along an edge of length 2h (corner to corner centres), evenly spread.
         let count = |h: f64| ((2.0 * h) / pitch).floor().max(1.0) as usize + 1;
         let spread = |h: f64, n: usize, i: usize| -h + 2.0 * h * i as f64 / (n - 1).max(1) as f64;
@@ -128,21 +131,30 @@ impl Board {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err((field.to_string(), format!("must be a positive length, got {v}")))
+                Err((
+                    field.to_string(),
+                    format!("must be a positive length, got {v}"),
+                ))
             }
         };
         positive("tag_size", self.tag_size)?;
         positive("window.width", self.window.width)?;
         positive("window.height", self.window.height)?;
         if self.tags.len() < 4 {
-            return Err(("tag".into(), format!("a board needs at least 4 tags, has {}", self.tags.len())));
+            return Err((
+                "tag".into(),
+                format!("a board needs at least 4 tags, has {}", self.tags.len()),
+            ));
         }
         let codes = tags::code_count(self.family);
         let half = self.outer_size() / 2.0;
         for (i, tag) in self.tags.iter().enumerate() {
             let field = format!("tag[{i}]");
             if usize::from(tag.id) >= codes {
-                return Err((format!("{field}.id"), format!("{} is not a tag36h11 code (0..{})", tag.id, codes - 1)));
+                return Err((
+                    format!("{field}.id"),
+                    format!("{} is not a tag36h11 code (0..{})", tag.id, codes - 1),
+                ));
             }
             if !tag.center.iter().all(|c| c.is_finite()) {
                 return Err((format!("{field}.center"), "must be finite".into()));
@@ -150,11 +162,17 @@ impl Board {
             let clear_x = tag.center[0].abs() - half >= self.window.width / 2.0;
             let clear_y = tag.center[1].abs() - half >= self.window.height / 2.0;
             if !(clear_x || clear_y) {
-                return Err((format!("{field}.center"), "the tag overlaps the sample window".into()));
+                return Err((
+                    format!("{field}.center"),
+                    "the tag overlaps the sample window".into(),
+                ));
             }
             for (j, other) in self.tags[..i].iter().enumerate() {
                 if other.id == tag.id {
-                    return Err((format!("{field}.id"), format!("id {} is also tag[{j}]'s", tag.id)));
+                    return Err((
+                        format!("{field}.id"),
+                        format!("id {} is also tag[{j}]'s", tag.id),
+                    ));
                 }
                 let apart = (0..2).any(|a| (other.center[a] - tag.center[a]).abs() >= 2.0 * half);
                 if !apart {
@@ -180,7 +198,12 @@ impl Board {
     pub fn corners(&self, id: u16) -> Option<[[f64; 2]; 4]> {
         let [x, y] = self.tag(id)?.center;
         let h = self.tag_size / 2.0;
-        Some([[x - h, y + h], [x + h, y + h], [x + h, y - h], [x - h, y - h]])
+        Some([
+            [x - h, y + h],
+            [x + h, y + h],
+            [x + h, y - h],
+            [x - h, y - h],
+        ])
     }
 
     /// The printed extent `[x_min, x_max, y_min, y_max]`: every tag's quiet zone and the window.

@@ -38,17 +38,26 @@ pub fn paper_radiance(board: &Board, capture: &Capture, pixel_samples: usize) ->
                                 c as f64 + ((j % grid) as f64 + 0.5) / grid as f64,
                                 r as f64 + ((j / grid) as f64 + 0.5) / grid as f64,
                             ];
-                            let Some(x) = photo.camera.surface_point(&capture.sample, position) else { continue };
+                            let Some(x) = photo.camera.surface_point(&capture.sample, position)
+                            else {
+                                continue;
+                            };
                             if capture.sample.contains(x) {
                                 continue;
                             }
-                            let on_board = x.x >= extent[0] && x.x <= extent[1] && x.y >= extent[2] && x.y <= extent[3];
+                            let on_board = x.x >= extent[0]
+                                && x.x <= extent[1]
+                                && x.y >= extent[2]
+                                && x.y <= extent[3];
                             let albedo = match board.is_black(x.x, x.y) {
                                 _ if !on_board => TABLE,
                                 Some(true) => PAPER_BLACK,
                                 _ => PAPER_WHITE,
                             };
-                            let e = photo.light.incident(camera, DVec3::new(x.x, x.y, 0.0)).irradiance;
+                            let e = photo
+                                .light
+                                .incident(camera, DVec3::new(x.x, x.y, 0.0))
+                                .irradiance;
                             for i in 0..3 {
                                 sum[i] += albedo * FRAC_1_PI * e[i] * photo.exposure;
                             }

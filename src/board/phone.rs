@@ -7,6 +7,7 @@
 //! - reprojection error of the refined pose below [`MAX_RMS_PX`] (a blurred or bent board);
 //! - lit by its flash: the white paper of the tags' quiet zones must follow the flash's
 //!   `cos / d^2` falloff ([`flash_share`] at least [`MIN_FLASH_SHARE`]).
+//!
 //! The run refuses (exit 2) when fewer than [`MIN_PHOTOS`] photos remain.
 
 use super::detect::{detect, TagCorners};
@@ -47,7 +48,8 @@ impl PhonePhoto {
             .iter()
             .map(|p| {
                 let y = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
-                (crate::capture::image_io::linear_to_srgb(f64::from(y)).clamp(0.0, 1.0) * 255.0).round() as u8
+                (crate::capture::image_io::linear_to_srgb(f64::from(y)).clamp(0.0, 1.0) * 255.0)
+                    .round() as u8
             })
             .collect()
     }
@@ -101,7 +103,10 @@ fn correspondences(board: &Board, tags: &[TagCorners]) -> Vec<Correspondence> {
     tags.iter()
         .flat_map(|t| {
             let truth = board.corners(t.id).expect("detect keeps board tags only");
-            (0..4).map(move |i| Correspondence { board: truth[i], image: t.corners[i] })
+            (0..4).map(move |i| Correspondence {
+                board: truth[i],
+                image: t.corners[i],
+            })
         })
         .collect()
 }
@@ -144,7 +149,8 @@ pub fn locate(
         let points = correspondences(board, &tags);
         match homography(&points) {
             Some(h) => {
-                reports[i].homography = Some(std::array::from_fn(|r| std::array::from_fn(|c| h[(r, c)])));
+                reports[i].homography =
+                    Some(std::array::from_fn(|r| std::array::from_fn(|c| h[(r, c)])));
                 seen.push((i, points, h));
             }
             None => reports[i].left_out = Some("the tags' corners are degenerate".into()),
@@ -173,7 +179,9 @@ pub fn locate(
             .then(|| pose_from_homography(&h, &intrinsics))
             .flatten()
         else {
-            report.left_out = Some("no focal length: give --focal-px (the views are too alike to estimate it)".into());
+            report.left_out = Some(
+                "no focal length: give --focal-px (the views are too alike to estimate it)".into(),
+            );
             continue;
         };
         let pose = refine_pose(pose, &intrinsics, &points);
@@ -185,7 +193,9 @@ pub fn locate(
         report.rotation_vector = Some([rv.x, rv.y, rv.z]);
         report.translation = Some([pose.translation.x, pose.translation.y, pose.translation.z]);
         if rms > MAX_RMS_PX {
-            report.left_out = Some(format!("reprojection error {rms:.2} px > {MAX_RMS_PX} px (board blurred or not flat?)"));
+            report.left_out = Some(format!(
+                "reprojection error {rms:.2} px > {MAX_RMS_PX} px (board blurred or not flat?)"
+            ));
             continue;
         }
         let share = flash_share(board, &photos[i], &intrinsics, &pose, flash_offset);
@@ -199,7 +209,12 @@ pub fn locate(
         }
         located.push(Located { index: i, pose });
     }
-    Located3d { intrinsics, focal_source, photos: located, reports }
+    Located3d {
+        intrinsics,
+        focal_source,
+        photos: located,
+        reports,
+    }
 }
 
 /// The flash position in the board frame for a camera at `pose`.
@@ -212,7 +227,13 @@ pub fn flash_position(pose: &Pose, flash_offset: [f64; 3]) -> Vector3<f64> {
 /// its linear luminance `v` is fitted as `v = a g + b` with `g = cos / d^2` of the flash; the
 /// share is `a mean(g) / mean(v)`. Ambient light alone gives a share near 0, a flash near 1.
 /// `None` when fewer than 8 paper points are in the photo.
-pub fn flash_share(board: &Board, photo: &PhonePhoto, k: &Intrinsics, pose: &Pose, flash_offset: [f64; 3]) -> Option<f64> {
+pub fn flash_share(
+    board: &Board,
+    photo: &PhonePhoto,
+    k: &Intrinsics,
+    pose: &Pose,
+    flash_offset: [f64; 3],
+) -> Option<f64> {
     let flash = flash_position(pose, flash_offset);
     let module = board.tag_size / super::tags::BLACK_MODULES as f64;
     let reach = board.tag_size / 2.0 + module / 2.0;
@@ -222,13 +243,16 @@ pub fn flash_share(board: &Board, photo: &PhonePhoto, k: &Intrinsics, pose: &Pos
             let t = s as f64 / 3.0 * (reach - module / 2.0);
             for [dx, dy] in [[t, reach], [t, -reach], [reach, t], [-reach, t]] {
                 let (x, y) = (tag.center[0] + dx, tag.center[1] + dy);
-                let Some(q) = pose.project(k, [x, y]) else { continue };
+                let Some(q) = pose.project(k, [x, y]) else {
+                    continue;
+                };
                 let (c, r) = (q[0].floor(), q[1].floor());
                 if c < 0.0 || r < 0.0 || c >= photo.width as f64 || r >= photo.height as f64 {
                     continue;
                 }
                 let p = photo.linear[r as usize * photo.width + c as usize];
-                let v = 0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2]);
+                let v =
+                    0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2]);
                 let to_flash = flash - Vector3::new(x, y, 0.0);
                 let d2 = to_flash.norm_squared();
                 samples.push((to_flash.z.max(0.0) / d2.sqrt() / d2, v));
@@ -239,8 +263,12 @@ pub fn flash_share(board: &Board, photo: &PhonePhoto, k: &Intrinsics, pose: &Pos
         return None;
     }
     let n = samples.len() as f64;
-    let (mg, mv) = samples.iter().fold((0.0, 0.0), |(a, b), s| (a + s.0 / n, b + s.1 / n));
-    let (sgg, sgv) = samples.iter().fold((0.0, 0.0), |(a, b), s| (a + (s.0 - mg).powi(2), b + (s.0 - mg) * (s.1 - mv)));
+    let (mg, mv) = samples
+        .iter()
+        .fold((0.0, 0.0), |(a, b), s| (a + s.0 / n, b + s.1 / n));
+    let (sgg, sgv) = samples.iter().fold((0.0, 0.0), |(a, b), s| {
+        (a + (s.0 - mg).powi(2), b + (s.0 - mg) * (s.1 - mv))
+    });
     if sgg <= 0.0 || mv <= 0.0 {
         return Some(0.0);
     }
@@ -263,10 +291,21 @@ pub struct Rectified {
 /// The sample window resampled to `resolution` pixels as a rectified photo (pixel (c, r)
 /// covers the window's `[c, c+1] x [r, r+1]` / resolution, row 0 at `+y`), each pixel the mean
 /// of `ss` x `ss` bilinear reads of the linear photo.
-pub fn rectify(board: &Board, photo: &PhonePhoto, k: &Intrinsics, pose: &Pose, resolution: [usize; 2], ss: usize) -> Rectified {
+pub fn rectify(
+    board: &Board,
+    photo: &PhonePhoto,
+    k: &Intrinsics,
+    pose: &Pose,
+    resolution: [usize; 2],
+    ss: usize,
+) -> Rectified {
     let (w, h) = (board.window.width, board.window.height);
     let n = resolution[0] * resolution[1];
-    let mut out = Rectified { rgb: Vec::with_capacity(n), keep: Vec::with_capacity(n), saturated: Vec::with_capacity(n) };
+    let mut out = Rectified {
+        rgb: Vec::with_capacity(n),
+        keep: Vec::with_capacity(n),
+        saturated: Vec::with_capacity(n),
+    };
     let center = pose.center();
     for r in 0..resolution[1] {
         for c in 0..resolution[0] {
@@ -305,7 +344,10 @@ fn bilinear(photo: &PhonePhoto, q: [f64; 2]) -> Option<([f64; 3], bool)> {
         return None;
     }
     let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(photo.width - 1), (y0 + 1).min(photo.height - 1));
+    let (x1, y1) = (
+        (x0 + 1).min(photo.width - 1),
+        (y0 + 1).min(photo.height - 1),
+    );
     let (fx, fy) = (x - x0 as f64, y - y0 as f64);
     let at = |xx: usize, yy: usize| photo.linear[yy * photo.width + xx].map(f64::from);
     let (a, b, c, d) = (at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1));

@@ -19,7 +19,10 @@ fn unit_in_cm(board: &Board) -> Result<f64> {
         "mm" => Ok(0.1),
         "m" => Ok(100.0),
         "in" => Ok(CM_PER_INCH),
-        other => Err(Error::argument("units", format!("unknown unit '{other}' (cm, mm, m or in)"))),
+        other => Err(Error::argument(
+            "units",
+            format!("unknown unit '{other}' (cm, mm, m or in)"),
+        )),
     }
 }
 
@@ -55,7 +58,10 @@ pub fn raster(board: &Board, dpi: f64) -> Result<(u32, u32, Vec<u8>)> {
         ((p[3] - p[2]) / units_per_dot).ceil() as u32,
     );
     if !(1..=30_000).contains(&w) || !(1..=30_000).contains(&h) {
-        return Err(Error::argument("--dpi", format!("gives a {w} x {h} image; choose another")));
+        return Err(Error::argument(
+            "--dpi",
+            format!("gives a {w} x {h} image; choose another"),
+        ));
     }
     let line = units_per_dot;
     let mut pixels = Vec::with_capacity((w * h) as usize);
@@ -112,5 +118,8 @@ pub fn write_svg(board: &Board, path: &Path) -> Result<()> {
         }
     }
     svg += "</svg>\n";
-    write_atomically(path, |out| out.write_all(svg.as_bytes()).map_err(|e| Error::io(path, e)))
+    write_atomically(path, |out| {
+        out.write_all(svg.as_bytes())
+            .map_err(|e| Error::io(path, e))
+    })
 }

@@ -10,18 +10,33 @@ use nalgebra::{Rotation3, Vector3};
 pub(crate) fn looking_at(eye: [f64; 3], roll: f64) -> Pose {
     let eye = Vector3::from(eye);
     let forward = (-eye).normalize();
-    let up_hint = if forward.cross(&Vector3::y()).norm() > 1e-6 { Vector3::y() } else { Vector3::x() };
+    let up_hint = if forward.cross(&Vector3::y()).norm() > 1e-6 {
+        Vector3::y()
+    } else {
+        Vector3::x()
+    };
     let right = forward.cross(&up_hint).normalize();
     let down = forward.cross(&right);
     // Rows of the world-to-camera rotation are the camera axes (OpenCV: x right, y down).
-    let r = nalgebra::Matrix3::from_rows(&[right.transpose(), down.transpose(), forward.transpose()]);
-    let rotation = Rotation3::from_axis_angle(&Vector3::z_axis(), roll) * Rotation3::from_matrix_unchecked(r);
-    Pose { rotation, translation: -(rotation * eye) }
+    let r =
+        nalgebra::Matrix3::from_rows(&[right.transpose(), down.transpose(), forward.transpose()]);
+    let rotation =
+        Rotation3::from_axis_angle(&Vector3::z_axis(), roll) * Rotation3::from_matrix_unchecked(r);
+    Pose {
+        rotation,
+        translation: -(rotation * eye),
+    }
 }
 
 /// Greyscale photo of the printed board (white 235, black 20, window 128) by a pinhole camera,
 /// `ss` x `ss` samples per pixel: the test's own rasteriser, independent of `print`.
-pub(crate) fn photograph(board: &Board, k: &Intrinsics, pose: &Pose, size: [usize; 2], ss: usize) -> Vec<u8> {
+pub(crate) fn photograph(
+    board: &Board,
+    k: &Intrinsics,
+    pose: &Pose,
+    size: [usize; 2],
+    ss: usize,
+) -> Vec<u8> {
     let inverse = pose.rotation.inverse();
     let center = pose.center();
     let mut grey = Vec::with_capacity(size[0] * size[1]);
@@ -35,7 +50,12 @@ pub(crate) fn photograph(board: &Board, k: &Intrinsics, pose: &Pose, size: [usiz
                 let t = -center.z / ray.z;
                 let (x, y) = (center.x + t * ray.x, center.y + t * ray.y);
                 let e = board.extent();
-                sum += if t <= 0.0 || x < e[0] - 1.0 || x > e[1] + 1.0 || y < e[2] - 1.0 || y > e[3] + 1.0 {
+                sum += if t <= 0.0
+                    || x < e[0] - 1.0
+                    || x > e[1] + 1.0
+                    || y < e[2] - 1.0
+                    || y > e[3] + 1.0
+                {
                     60.0
                 } else {
                     match board.is_black(x, y) {
@@ -95,7 +115,11 @@ fn printed_board_is_read_back_by_the_detector_with_every_tag() {
         for (seen, truth) in t.corners.iter().zip(b.corners(t.id).unwrap()) {
             let x = (truth[0] - (e[0] - margin)) * dots_per_cm;
             let y = ((e[3] + margin) - truth[1]) * dots_per_cm;
-            assert!((seen[0] - x).abs() < 0.75 && (seen[1] - y).abs() < 0.75, "tag {} {seen:?} vs {x},{y}", t.id);
+            assert!(
+                (seen[0] - x).abs() < 0.75 && (seen[1] - y).abs() < 0.75,
+                "tag {} {seen:?} vs {x},{y}",
+                t.id
+            );
         }
     }
 }
@@ -103,12 +127,25 @@ fn printed_board_is_read_back_by_the_detector_with_every_tag() {
 #[test]
 fn oblique_rolled_photos_give_corners_in_the_boards_order() {
     let b = board();
-    let k = Intrinsics { focal: 700.0, cx: 320.0, cy: 240.0 };
-    for (eye, roll) in [([4.0, -6.0, 30.0], 0.3), ([-8.0, 3.0, 28.0], 2.0), ([2.0, 9.0, 26.0], -1.4)] {
+    let k = Intrinsics {
+        focal: 700.0,
+        cx: 320.0,
+        cy: 240.0,
+    };
+    for (eye, roll) in [
+        ([4.0, -6.0, 30.0], 0.3),
+        ([-8.0, 3.0, 28.0], 2.0),
+        ([2.0, 9.0, 26.0], -1.4),
+    ] {
         let pose = looking_at(eye, roll);
         let grey = photograph(&b, &k, &pose, [640, 480], 3);
         let found = detect(&b, 640, 480, grey).unwrap();
-        assert!(found.len() >= b.tags.len() - 2, "{} of {} tags at {eye:?}", found.len(), b.tags.len());
+        assert!(
+            found.len() >= b.tags.len() - 2,
+            "{} of {} tags at {eye:?}",
+            found.len(),
+            b.tags.len()
+        );
         // A wrong corner order or a half-pixel convention error shows as a bias; a single
         // corner of a ~37 px tag is good to about half a pixel.
         let (mut bias, mut n) = ([0.0; 2], 0.0);
@@ -121,11 +158,20 @@ fn oblique_rolled_photos_give_corners_in_the_boards_order() {
                 n += 1.0;
             }
         }
-        assert!(bias.iter().all(|b| (b / n).abs() < 0.1), "mean offset {bias:?} / {n}");
+        assert!(
+            bias.iter().all(|b| (b / n).abs() < 0.1),
+            "mean offset {bias:?} / {n}"
+        );
     }
 }
 
-fn correspondences(b: &Board, k: &Intrinsics, pose: &Pose, noise: f64, seed: u64) -> Vec<Correspondence> {
+fn correspondences(
+    b: &Board,
+    k: &Intrinsics,
+    pose: &Pose,
+    noise: f64,
+    seed: u64,
+) -> Vec<Correspondence> {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
     b.tags
@@ -133,8 +179,14 @@ fn correspondences(b: &Board, k: &Intrinsics, pose: &Pose, noise: f64, seed: u64
         .flat_map(|t| b.corners(t.id).unwrap())
         .map(|board| {
             let q = pose.project(k, board).unwrap();
-            let jitter = [rng.random_range(-noise..=noise), rng.random_range(-noise..=noise)];
-            Correspondence { board, image: [q[0] + jitter[0], q[1] + jitter[1]] }
+            let jitter = [
+                rng.random_range(-noise..=noise),
+                rng.random_range(-noise..=noise),
+            ];
+            Correspondence {
+                board,
+                image: [q[0] + jitter[0], q[1] + jitter[1]],
+            }
         })
         .collect()
 }
@@ -142,10 +194,27 @@ fn correspondences(b: &Board, k: &Intrinsics, pose: &Pose, noise: f64, seed: u64
 #[test]
 fn homography_focal_and_pose_recover_a_known_camera() {
     let b = board();
-    let truth_k = Intrinsics { focal: 1500.0, cx: 960.0, cy: 720.0 };
-    let eyes = [[5.0, -8.0, 30.0], [-9.0, 2.0, 27.0], [1.0, 10.0, 32.0], [7.0, 7.0, 29.0]];
-    let poses: Vec<Pose> = eyes.iter().enumerate().map(|(i, &e)| looking_at(e, 0.4 * i as f64)).collect();
-    let sets: Vec<_> = poses.iter().enumerate().map(|(i, p)| correspondences(&b, &truth_k, p, 0.3, i as u64)).collect();
+    let truth_k = Intrinsics {
+        focal: 1500.0,
+        cx: 960.0,
+        cy: 720.0,
+    };
+    let eyes = [
+        [5.0, -8.0, 30.0],
+        [-9.0, 2.0, 27.0],
+        [1.0, 10.0, 32.0],
+        [7.0, 7.0, 29.0],
+    ];
+    let poses: Vec<Pose> = eyes
+        .iter()
+        .enumerate()
+        .map(|(i, &e)| looking_at(e, 0.4 * i as f64))
+        .collect();
+    let sets: Vec<_> = poses
+        .iter()
+        .enumerate()
+        .map(|(i, p)| correspondences(&b, &truth_k, p, 0.3, i as u64))
+        .collect();
     let hs: Vec<_> = sets.iter().map(|s| homography(s).unwrap()).collect();
     let focal = focal_from_homographies(&hs, truth_k.cx, truth_k.cy).unwrap();
     assert!((focal / truth_k.focal - 1.0).abs() < 0.01, "focal {focal}");
@@ -154,8 +223,15 @@ fn homography_focal_and_pose_recover_a_known_camera() {
         let pose = refine_pose(pose_from_homography(h, &k).unwrap(), &k, set);
         let c = pose.center();
         let distance = Vector3::from(eye).norm();
-        assert!((c - Vector3::from(eye)).norm() < 0.01 * distance, "centre {c:?} vs {eye:?}");
-        assert!(pose.rms_error(&k, set) < 0.6, "rms {}", pose.rms_error(&k, set));
+        assert!(
+            (c - Vector3::from(eye)).norm() < 0.01 * distance,
+            "centre {c:?} vs {eye:?}"
+        );
+        assert!(
+            pose.rms_error(&k, set) < 0.6,
+            "rms {}",
+            pose.rms_error(&k, set)
+        );
         assert!(truth.rms_error(&k, set) < 0.6);
     }
 }
@@ -163,9 +239,11 @@ fn homography_focal_and_pose_recover_a_known_camera() {
 #[test]
 fn degenerate_correspondences_have_no_homography() {
     let line: Vec<Correspondence> = (0..6)
-        .map(|i| Correspondence { board: [i as f64, 2.0 * i as f64], image: [10.0 * i as f64, 3.0] })
+        .map(|i| Correspondence {
+            board: [i as f64, 2.0 * i as f64],
+            image: [10.0 * i as f64, 3.0],
+        })
         .collect();
     assert!(homography(&line).is_none());
     assert!(homography(&line[..3]).is_none());
 }
-

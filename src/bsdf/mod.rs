@@ -26,11 +26,11 @@ pub mod fast_msx;
 pub mod heitz;
 pub mod kulla_conty;
 pub mod lobe_mixture;
-#[cfg(test)]
-mod published_quirks;
 mod position_free;
 #[cfg(test)]
 mod properties;
+#[cfg(test)]
+mod published_quirks;
 pub mod roulette;
 pub mod single;
 #[cfg(test)]

@@ -28,10 +28,18 @@ fn surface(alpha: f64) -> SingleBounce<f64> {
 }
 
 /// Paths of exactly two bounces: `multi` of each estimator capped at two reflections.
-fn two_bounce(brdf: &dyn Brdf, wi_theta: f64, wo_theta: f64, n: usize, seed: u64) -> crate::albedo::Estimate {
+fn two_bounce(
+    brdf: &dyn Brdf,
+    wi_theta: f64,
+    wo_theta: f64,
+    n: usize,
+    seed: u64,
+) -> crate::albedo::Estimate {
     let (wi, wo) = (unit(wi_theta, 0.0), unit(wo_theta, 180.0));
     let mut e = mean_eval(brdf, wi, wo, n, seed);
-    let single = brdf.eval(wi, wo, &mut crate::albedo::rng_stream(0, 0)).single;
+    let single = brdf
+        .eval(wi, wo, &mut crate::albedo::rng_stream(0, 0))
+        .single;
     e.value = [0, 1, 2].map(|c| e.value[c] - single[c]);
     e
 }
@@ -76,16 +84,22 @@ fn correlated_wang_differs_from_heitz_by_the_papers_design_toward_grazing() {
     let w = two_bounce(&wang, 0.0, 80.0, 200_000, 31);
     let h = two_bounce(&heitz, 0.0, 80.0, 200_000, 32);
     let ratio = w.value[0] / h.value[0];
-    let sigma = ratio * ((w.stderr[0] / w.value[0]).powi(2) + (h.stderr[0] / h.value[0]).powi(2)).sqrt();
+    let sigma =
+        ratio * ((w.stderr[0] / w.value[0]).powi(2) + (h.stderr[0] / h.value[0]).powi(2)).sqrt();
     eprintln!("wang / heitz at two bounces: {ratio:.3} +- {sigma:.3}");
-    assert!((ratio - 4.3).abs() < (0.3f64).max(4.0 * sigma), "ratio {ratio:.3} +- {sigma:.3}");
+    assert!(
+        (ratio - 4.3).abs() < (0.3f64).max(4.0 * sigma),
+        "ratio {ratio:.3} +- {sigma:.3}"
+    );
 }
 
 #[test]
 fn fast_msx_adds_energy_as_printed() {
     // Eq. 9, 16-20 as printed: white albedo at normal incidence (quadrature, error < 1e-4).
     let albedo = |alpha: f64| {
-        let fast = FastMsx { single: surface(alpha) };
+        let fast = FastMsx {
+            single: surface(alpha),
+        };
         let single = surface(alpha);
         let wi = unit(0.0, 0.0);
         (
@@ -94,14 +108,27 @@ fn fast_msx_adds_energy_as_printed() {
         )
     };
     let (total, single) = albedo(0.3);
-    assert!((total - 1.25).abs() < 0.01, "fast-msx albedo at alpha 0.3: {total}");
+    assert!(
+        (total - 1.25).abs() < 0.01,
+        "fast-msx albedo at alpha 0.3: {total}"
+    );
     assert!((single - 0.877).abs() < 0.002, "its single lobe: {single}");
-    assert!((total - single - 0.374).abs() < 0.005, "its added lobe: {}", total - single);
+    assert!(
+        (total - single - 0.374).abs() < 0.005,
+        "its added lobe: {}",
+        total - single
+    );
     // The added lobe is not the missing energy: the scale that would fill the shortfall is
     // 0.33 at alpha 0.3 and 1.31 at alpha 1, so no constant fixes it.
     let scale = |(total, single): (f64, f64)| (1.0 - single) / (total - single);
     let (at_03, at_1) = (scale((total, single)), scale(albedo(1.0)));
-    assert!((at_03 - 0.33).abs() < 0.01 && (at_1 - 1.31).abs() < 0.02, "scales {at_03:.3}, {at_1:.3}");
+    assert!(
+        (at_03 - 0.33).abs() < 0.01 && (at_1 - 1.31).abs() < 0.02,
+        "scales {at_03:.3}, {at_1:.3}"
+    );
     let (total_1, _) = albedo(1.0);
-    assert!((total_1 - 0.84).abs() < 0.01, "fast-msx albedo at alpha 1: {total_1}");
+    assert!(
+        (total_1 - 0.84).abs() < 0.01,
+        "fast-msx albedo at alpha 1: {total_1}"
+    );
 }

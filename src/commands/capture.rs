@@ -93,13 +93,14 @@ fn parse_triple(text: &str) -> std::result::Result<[f64; 3], String> {
 
 pub fn run_board(args: &BoardArgs) -> Result<()> {
     let board = Board::ring(args.window[0], args.window[1], args.tag_size, args.gap);
-    board
-        .validate()
-        .map_err(|(field, message)| Error::argument(format!("--{}", field.replace('_', "-")), message))?;
+    board.validate().map_err(|(field, message)| {
+        Error::argument(format!("--{}", field.replace('_', "-")), message)
+    })?;
     let folder = StagedFolder::new(&args.output, args.force)?;
     let toml_path = folder.path("board.toml");
     write_atomically(&toml_path, |w| {
-        std::io::Write::write_all(w, board.to_toml().as_bytes()).map_err(|e| Error::io(&toml_path, e))
+        std::io::Write::write_all(w, board.to_toml().as_bytes())
+            .map_err(|e| Error::io(&toml_path, e))
     })?;
     print::write_png(&board, args.dpi, &folder.path("board.png"))?;
     print::write_svg(&board, &folder.path("board.svg"))?;
@@ -120,7 +121,9 @@ pub fn run_board(args: &BoardArgs) -> Result<()> {
 /// 43.27 mm diagonal spans the image diagonal), if present.
 fn exif_focal_px(path: &Path, width: usize, height: usize) -> Option<f64> {
     let file = std::fs::File::open(path).ok()?;
-    let exif = exif::Reader::new().read_from_container(&mut std::io::BufReader::new(file)).ok()?;
+    let exif = exif::Reader::new()
+        .read_from_container(&mut std::io::BufReader::new(file))
+        .ok()?;
     let field = exif.get_field(exif::Tag::FocalLengthIn35mmFilm, exif::In::PRIMARY)?;
     let f35 = f64::from(field.value.get_uint(0)?);
     let diagonal_px = ((width * width + height * height) as f64).sqrt();
@@ -134,17 +137,37 @@ fn read_photo(path: &Path) -> Result<PhonePhoto> {
         .map_err(|e| Error::io(path, e))?
         .with_guessed_format()
         .map_err(|e| Error::io(path, e))?;
-    let mut decoder = reader.into_decoder().map_err(|e| Error::invalid(path, "image", e.to_string()))?;
-    let orientation = decoder.orientation().unwrap_or(image::metadata::Orientation::NoTransforms);
-    let mut image = image::DynamicImage::from_decoder(decoder).map_err(|e| Error::invalid(path, "image", e.to_string()))?;
+    let mut decoder = reader
+        .into_decoder()
+        .map_err(|e| Error::invalid(path, "image", e.to_string()))?;
+    let orientation = decoder
+        .orientation()
+        .unwrap_or(image::metadata::Orientation::NoTransforms);
+    let mut image = image::DynamicImage::from_decoder(decoder)
+        .map_err(|e| Error::invalid(path, "image", e.to_string()))?;
     image.apply_orientation(orientation);
     let rgb = image.to_rgb8();
     let (width, height) = (rgb.width() as usize, rgb.height() as usize);
-    let table: Vec<f32> = (0..=255).map(|v| srgb_to_linear(f64::from(v) / 255.0) as f32).collect();
-    let linear = rgb.pixels().map(|p| p.0.map(|v| table[usize::from(v)])).collect();
+    let table: Vec<f32> = (0..=255)
+        .map(|v| srgb_to_linear(f64::from(v) / 255.0) as f32)
+        .collect();
+    let linear = rgb
+        .pixels()
+        .map(|p| p.0.map(|v| table[usize::from(v)]))
+        .collect();
     let clipped = clipped_pixels(&rgb);
-    let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    Ok(PhonePhoto { name, width, height, linear, clipped, exif_focal_px: exif_focal_px(path, width, height) })
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    Ok(PhonePhoto {
+        name,
+        width,
+        height,
+        linear,
+        clipped,
+        exif_focal_px: exif_focal_px(path, width, height),
+    })
 }
 
 /// A mask PNG: 255 where `nonzero`, else 0.
@@ -155,11 +178,15 @@ const CLIPPED_FROM: u8 = 250;
 /// Pixels within one pixel of a channel at or above [`CLIPPED_FROM`].
 fn clipped_pixels(rgb: &image::RgbImage) -> Vec<bool> {
     let (w, h) = (rgb.width() as usize, rgb.height() as usize);
-    let high: Vec<bool> = rgb.pixels().map(|p| p.0.iter().any(|&v| v >= CLIPPED_FROM)).collect();
+    let high: Vec<bool> = rgb
+        .pixels()
+        .map(|p| p.0.iter().any(|&v| v >= CLIPPED_FROM))
+        .collect();
     (0..w * h)
         .map(|i| {
             let (x, y) = (i % w, i / w);
-            (y.saturating_sub(1)..(y + 2).min(h)).any(|yy| (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| high[yy * w + xx]))
+            (y.saturating_sub(1)..(y + 2).min(h))
+                .any(|yy| (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| high[yy * w + xx]))
         })
         .collect()
 }
@@ -168,13 +195,23 @@ fn write_mask(path: &Path, nonzero: &[bool], width: usize, height: usize) -> Res
     let bytes = nonzero.iter().map(|&k| if k { 255 } else { 0 }).collect();
     let image = image::GrayImage::from_raw(width as u32, height as u32, bytes).expect("mask size");
     write_atomically(path, |w| {
-        image::DynamicImage::ImageLuma8(image).write_to(w, image::ImageFormat::Png).map_err(|e| Error::io(path, e))
+        image::DynamicImage::ImageLuma8(image)
+            .write_to(w, image::ImageFormat::Png)
+            .map_err(|e| Error::io(path, e))
     })
 }
 
 /// Writes the photo set of the located photos into `dir`: rectified at `longer` pixels along
 /// the window's longer side, or the perspective photos.
-fn write_photo_set(dir: &Path, name: &str, board: &Board, photos: &[PhonePhoto], located: &phone::Located3d, args: &CaptureArgs, longer: usize) -> Result<()> {
+fn write_photo_set(
+    dir: &Path,
+    name: &str,
+    board: &Board,
+    photos: &[PhonePhoto],
+    located: &phone::Located3d,
+    args: &CaptureArgs,
+    longer: usize,
+) -> Result<()> {
     let (w, h) = (board.window.width, board.window.height);
     let resolution = if w >= h {
         [longer, ((longer as f64 * h / w).round() as usize).max(1)]
@@ -188,7 +225,10 @@ fn write_photo_set(dir: &Path, name: &str, board: &Board, photos: &[PhonePhoto],
         let pose = &found.pose;
         let c = pose.center();
         let flash = phone::flash_position(pose, args.flash_offset);
-        let light = Light::Point { position: DVec3::new(flash.x, flash.y, flash.z), intensity: args.flash_intensity };
+        let light = Light::Point {
+            position: DVec3::new(flash.x, flash.y, flash.z),
+            intensity: args.flash_intensity,
+        };
         let stem = format!("{:02}", capture_photos.len());
         let (camera, rgb, keep, saturated, size) = if args.perspective {
             let inverse = pose.rotation.inverse();
@@ -204,18 +244,45 @@ fn write_photo_set(dir: &Path, name: &str, board: &Board, photos: &[PhonePhoto],
                 cy: k.cy,
                 resolution: [photo.width, photo.height],
             });
-            (camera, photo.linear.clone(), vec![true; photo.width * photo.height], photo.clipped.clone(), [photo.width, photo.height])
+            (
+                camera,
+                photo.linear.clone(),
+                vec![true; photo.width * photo.height],
+                photo.clipped.clone(),
+                [photo.width, photo.height],
+            )
         } else {
             // Enough reads per output pixel to average every photo pixel it covers.
-            let corners = [[-w / 2.0, h / 2.0], [w / 2.0, h / 2.0], [w / 2.0, -h / 2.0], [-w / 2.0, -h / 2.0]];
-            let q: Vec<[f64; 2]> = corners.iter().filter_map(|&p| pose.project(&k, p)).collect();
-            let span = q.iter().zip(q.iter().cycle().skip(1)).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).fold(0.0, f64::max);
+            let corners = [
+                [-w / 2.0, h / 2.0],
+                [w / 2.0, h / 2.0],
+                [w / 2.0, -h / 2.0],
+                [-w / 2.0, -h / 2.0],
+            ];
+            let q: Vec<[f64; 2]> = corners
+                .iter()
+                .filter_map(|&p| pose.project(&k, p))
+                .collect();
+            let span = q
+                .iter()
+                .zip(q.iter().cycle().skip(1))
+                .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
+                .fold(0.0, f64::max);
             let ss = ((span / resolution[0] as f64).ceil() as usize).clamp(2, 16);
-            let rectified = phone::rectify(&board, photo, &k, pose, resolution, ss);
-            let camera = Camera::Rectified(Rectified { position: DVec3::new(c.x, c.y, c.z), resolution });
-            (camera, rectified.rgb, rectified.keep, rectified.saturated, resolution)
+            let rectified = phone::rectify(board, photo, &k, pose, resolution, ss);
+            let camera = Camera::Rectified(Rectified {
+                position: DVec3::new(c.x, c.y, c.z),
+                resolution,
+            });
+            (
+                camera,
+                rectified.rgb,
+                rectified.keep,
+                rectified.saturated,
+                resolution,
+            )
         };
-        write_exr(&dir.join(&format!("{stem}.exr")), &rgb, size[0], size[1])?;
+        write_exr(&dir.join(format!("{stem}.exr")), &rgb, size[0], size[1])?;
         let mask = if args.perspective {
             // Pixels that do not see the sample window are outside the sample anyway; a mask
             // is only needed where the photo itself ends.
@@ -223,7 +290,12 @@ fn write_photo_set(dir: &Path, name: &str, board: &Board, photos: &[PhonePhoto],
         } else if keep.iter().all(|&k| k) {
             None
         } else {
-            write_mask(&dir.join(&format!("{stem}_mask.png")), &keep, size[0], size[1])?;
+            write_mask(
+                &dir.join(format!("{stem}_mask.png")),
+                &keep,
+                size[0],
+                size[1],
+            )?;
             Some(PathBuf::from(format!("{stem}_mask.png")))
         };
         // Clipped photo pixels carry no radiance: the fit leaves them out (nonzero = saturated).
@@ -249,7 +321,10 @@ fn write_photo_set(dir: &Path, name: &str, board: &Board, photos: &[PhonePhoto],
         name: name.to_owned(),
         units: board.units.clone(),
         root: dir.to_path_buf(),
-        sample: Sample { width: w, height: h },
+        sample: Sample {
+            width: w,
+            height: h,
+        },
         color: None,
         depth: 0.0,
         photos: capture_photos,
@@ -261,37 +336,78 @@ fn write_photo_set(dir: &Path, name: &str, board: &Board, photos: &[PhonePhoto],
 pub fn run_capture(args: &CaptureArgs) -> Result<()> {
     let board = Board::load(&args.board)?;
     if let Some(n) = args.resolution.iter().find(|n| !(8..=8192).contains(*n)) {
-        return Err(Error::argument("--resolution", format!("must be 8 to 8192, got {n}")));
+        return Err(Error::argument(
+            "--resolution",
+            format!("must be 8 to 8192, got {n}"),
+        ));
     }
     if args.resolution.is_empty() {
         return Err(Error::argument("--resolution", "give at least one size"));
     }
     if let Some(f) = args.focal_px.filter(|f| !(f.is_finite() && *f > 0.0)) {
-        return Err(Error::argument("--focal-px", format!("must be a positive length, got {f}")));
+        return Err(Error::argument(
+            "--focal-px",
+            format!("must be a positive length, got {f}"),
+        ));
     }
-    let photos: Vec<PhonePhoto> = args.photos.iter().map(|p| read_photo(p)).collect::<Result<_>>()?;
-    if let Some(p) = photos.iter().find(|p| (p.width, p.height) != (photos[0].width, photos[0].height)) {
-        return Err(Error::invalid(&args.photos[photos.iter().position(|q| std::ptr::eq(q, p)).unwrap()], "size",
-            format!("{}x{}, but the first photo is {}x{}: one phone, one resolution", p.width, p.height, photos[0].width, photos[0].height)));
+    let photos: Vec<PhonePhoto> = args
+        .photos
+        .iter()
+        .map(|p| read_photo(p))
+        .collect::<Result<_>>()?;
+    if let Some(p) = photos
+        .iter()
+        .find(|p| (p.width, p.height) != (photos[0].width, photos[0].height))
+    {
+        return Err(Error::invalid(
+            &args.photos[photos.iter().position(|q| std::ptr::eq(q, p)).unwrap()],
+            "size",
+            format!(
+                "{}x{}, but the first photo is {}x{}: one phone, one resolution",
+                p.width, p.height, photos[0].width, photos[0].height
+            ),
+        ));
     }
     let located = phone::locate(&board, &photos, args.focal_px, args.flash_offset);
     for r in &located.reports {
         match &r.left_out {
             Some(why) => eprintln!("{}: left out: {why}", r.name),
-            None => eprintln!("{}: {} tags, reprojection {:.2} px", r.name, r.tags_found, r.rms_px.unwrap_or(f64::NAN)),
+            None => eprintln!(
+                "{}: {} tags, reprojection {:.2} px",
+                r.name,
+                r.tags_found,
+                r.rms_px.unwrap_or(f64::NAN)
+            ),
         }
     }
     if located.photos.len() < phone::MIN_PHOTOS {
         return Err(Error::argument(
             "photos",
-            format!("{} of {} photos usable, {} needed (see the reasons above)", located.photos.len(), photos.len(), phone::MIN_PHOTOS),
+            format!(
+                "{} of {} photos usable, {} needed (see the reasons above)",
+                located.photos.len(),
+                photos.len(),
+                phone::MIN_PHOTOS
+            ),
         ));
     }
     let folder = StagedFolder::new(&args.output, args.force)?;
-    let name = args.output.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "capture".into());
-    let sizes: &[usize] = if args.perspective { &args.resolution[..1] } else { &args.resolution };
+    let name = args
+        .output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "capture".into());
+    let sizes: &[usize] = if args.perspective {
+        &args.resolution[..1]
+    } else {
+        &args.resolution
+    };
     for (i, &longer) in sizes.iter().enumerate() {
-        let dir = if i == 0 { folder.path("") } else { folder.path(&longer.to_string()) };
+        let dir = if i == 0 {
+            folder.path("")
+        } else {
+            folder.path(&longer.to_string())
+        };
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&args.output, e))?;
         write_photo_set(&dir, &name, &board, &photos, &located, args, longer)?;
     }
@@ -304,13 +420,19 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
         "sources": args.photos,
     });
     let report_path = folder.path("capture-report.json");
-    write_atomically(&report_path, |wr| serde_json::to_writer_pretty(&mut *wr, &report).map_err(|e| Error::io(&report_path, e)))?;
+    write_atomically(&report_path, |wr| {
+        serde_json::to_writer_pretty(&mut *wr, &report).map_err(|e| Error::io(&report_path, e))
+    })?;
     folder.commit()?;
     eprintln!(
         "wrote {} of {} photos ({}) to {}; focal {:.1} px ({:?})",
         located.photos.len(),
         photos.len(),
-        if args.perspective { "perspective".to_string() } else { format!("rectified at {:?} px", sizes) },
+        if args.perspective {
+            "perspective".to_string()
+        } else {
+            format!("rectified at {:?} px", sizes)
+        },
         args.output.display(),
         k.focal,
         located.focal_source

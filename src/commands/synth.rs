@@ -163,17 +163,30 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
 }
 
 /// `<stem>.jpg` per photo: linear radiance times `gain`, clipped at 1, sRGB-encoded to 8 bits.
-fn write_phone_jpegs(folder: &std::path::Path, records: &ShadingRecords, pixels: &[[f64; 3]], gain: f64, quality: u8) -> Result<()> {
+fn write_phone_jpegs(
+    folder: &std::path::Path,
+    records: &ShadingRecords,
+    pixels: &[[f64; 3]],
+    gain: f64,
+    quality: u8,
+) -> Result<()> {
     use crate::capture::image_io::linear_to_srgb;
     for photo in &records.photos {
         let bytes: Vec<u8> = pixels[photo.pixels()]
             .iter()
-            .flat_map(|v| v.map(|c| (linear_to_srgb((c * gain).clamp(0.0, 1.0)) * 255.0).round() as u8))
+            .flat_map(|v| {
+                v.map(|c| (linear_to_srgb((c * gain).clamp(0.0, 1.0)) * 255.0).round() as u8)
+            })
             .collect();
         let path = folder.join(format!("{}.jpg", photo.stem));
         crate::capture::atomic_file::write_atomically(&path, |w| {
             image::codecs::jpeg::JpegEncoder::new_with_quality(w, quality)
-                .encode(&bytes, photo.width as u32, photo.height as u32, image::ExtendedColorType::Rgb8)
+                .encode(
+                    &bytes,
+                    photo.width as u32,
+                    photo.height as u32,
+                    image::ExtendedColorType::Rgb8,
+                )
                 .map_err(|e| Error::io(&path, e))
         })?;
     }

@@ -1,10 +1,10 @@
 //! The regrouped, finite-at-grazing product of `segments.rs` and the estimators against the
 //! paper's equations transcribed literally (eq. 1-2, 6-11, 15-23).
 
+use super::tests::{surface, HEIGHTS, NDFS};
 use super::*;
 use crate::albedo::rng_stream;
 use crate::bsdf::testing::*;
-use super::tests::{surface, HEIGHTS, NDFS};
 
 /// `rho = f(path)` of eq. 1 transcribed literally: vertex terms eq. 2, segment terms eq. 6-8
 /// and 11 (uncorrelated) or eq. 6, 11, 17-18, 22-23 (correlated), with `G1` of eq. 9-10

@@ -11,8 +11,7 @@ use crate::microfacet::Fresnel;
 
 pub(super) const HEIGHTS: [Height; 2] = [Height::Uncorrelated, Height::Correlated];
 pub(super) const NDFS: [NdfKind; 2] = [NdfKind::Ggx, NdfKind::Beckmann];
-const ESTIMATORS: [WangEstimator; 2] =
-    [WangEstimator::PathTracing, WangEstimator::Bidirectional];
+const ESTIMATORS: [WangEstimator; 2] = [WangEstimator::PathTracing, WangEstimator::Bidirectional];
 
 pub(super) fn surface(
     ndf: NdfKind,
@@ -108,10 +107,7 @@ fn white_furnace(estimator: WangEstimator) {
                         let again = furnace_by_eval(&m, wi, 0.0013, seed + 1000);
                         retried.push(format!(
                             "{label}: {:.5} +- {:.5} then {:.5} +- {:.5}",
-                            by_eval.value[0],
-                            by_eval.stderr[0],
-                            again.value[0],
-                            again.stderr[0]
+                            by_eval.value[0], by_eval.stderr[0], again.value[0], again.stderr[0]
                         ));
                         by_eval = again;
                     }
@@ -251,12 +247,7 @@ enum Untestable {
 
 /// Evaluations for a z-test of `f(wi, wo)`: enough for an effective sample size of 400 in
 /// the multi-bounce part (20 000 to 40 000), or why the configuration cannot be tested.
-fn evals_needed(
-    m: &Wang,
-    wi: Vec3<f64>,
-    wo: Vec3<f64>,
-    seed: u64,
-) -> Result<usize, Untestable> {
+fn evals_needed(m: &Wang, wi: Vec3<f64>, wo: Vec3<f64>, seed: u64) -> Result<usize, Untestable> {
     let pilot = 5000;
     let mut rng = rng_stream(seed, 9);
     let (mut s1, mut s2, mut t1, mut t2) = (0.0, 0.0, 0.0, 0.0);
@@ -365,10 +356,7 @@ fn pt_and_bdpt_agree_correlated() {
 
 /// z-scores of `f(wi, wo)` against `f(wo, wi)` on the first 50 configurations that both
 /// directions can test (see [`Untestable`]), and the configurations left out on the way.
-fn reciprocity_z(
-    height: Height,
-    estimator: WangEstimator,
-) -> (Vec<f64>, Vec<String>, Vec<f64>) {
+fn reciprocity_z(height: Height, estimator: WangEstimator) -> (Vec<f64>, Vec<String>, Vec<f64>) {
     let (mut z, mut left_out, mut rel) = (Vec::new(), Vec::new(), Vec::new());
     for (k, (alpha, wi, wo)) in random_configurations(120, 31).into_iter().enumerate() {
         if z.len() == 150 {
