@@ -15,4 +15,5 @@
 pub mod cpu_time;
 pub mod estimators;
 pub mod jobs;
+pub mod kernel;
 pub mod plot;

@@ -15,6 +15,7 @@ use super::output::StagedFolder;
 use crate::bench::cpu_time::process_seconds;
 use crate::bench::estimators::{self, EstimatorRow, EstimatorSettings, ALPHA_RANGE};
 use crate::bench::jobs::{self, JobRow, RenderTiming};
+use crate::bench::kernel::{self, KernelRow};
 use crate::bench::plot::error_against_time;
 use crate::bsdf::Model;
 use crate::capture::atomic_file::write_atomically;
@@ -108,6 +109,8 @@ struct FitSettings {
 #[derive(Serialize)]
 struct BenchReport {
     estimators: Vec<EstimatorRow>,
+    /// `single` by the scalar and the batch kernel on the same pairs (`bench::kernel`).
+    kernel: KernelRow,
     jobs: Vec<JobRow>,
     settings: Settings,
     notes: Vec<String>,
@@ -192,6 +195,11 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
         }
     });
     finish(&bar);
+    let kernel_row = kernel::measure(
+        settings.estimators.configurations,
+        settings.estimators.timing_seconds,
+        settings.estimators.seed,
+    );
 
     let mut job_rows = Vec::new();
     if let (Some(r), Some((records, material))) = (&settings.render, &render_inputs) {
@@ -239,6 +247,7 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
     let report = BenchReport {
         notes: notes(&settings, &estimator_rows, &job_rows),
         estimators: estimator_rows,
+        kernel: kernel_row,
         jobs: job_rows,
         settings,
         wall_seconds: started.elapsed().as_secs_f64(),
@@ -382,6 +391,11 @@ fn tables(report: &BenchReport) -> String {
             r.model, r.worst_bias_vs_heitz, r.worst_bias_at
         );
     }
+    let k = &report.kernel;
+    out += &format!(
+        "\nkernel: single (GGX copper, alpha 0.3) over {} pairs, one thread: scalar {:.1} ns/eval, batch {:.2} ns/eval ({:.1}x; preparing the batch's geometry once: {:.1} ns/pair)\n",
+        k.pairs, k.scalar_ns_per_eval, k.batch_ns_per_eval, k.speedup, k.batch_prepare_ns_per_eval
+    );
     if !report.jobs.is_empty() {
         out += &format!(
             "\n{:<7} {:<12} {:>5} {:>9} {:>9} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6}\n",

@@ -18,7 +18,8 @@
 use super::params::ParamSpace;
 use crate::bsdf::{differentiable, BounceCap};
 use crate::loss::{ImageLayout, Loss, LossKind};
-use crate::render::plan::{PlanSummary, RenderPlan, Skips};
+use crate::render::batch::BatchRecords;
+use crate::render::plan::{MultiTerm, PlanSummary, RenderPlan, Skips};
 use crate::render::{
     render_material, render_material_streams, render_planned_split, render_planned_streams,
     SplitRender,
@@ -26,7 +27,7 @@ use crate::render::{
 use crate::scalar::Real;
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
-use num_dual::DualSVec64;
+use num_dual::{Dual64, DualSVec64};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
@@ -79,6 +80,8 @@ pub struct Objective<'a> {
     /// Which work skips the renders may use, and the plan built from them on first use.
     skips: Skips,
     plan: OnceLock<RenderPlan>,
+    /// The records of the loss pixels for the batch kernel, built on first use.
+    batch: OnceLock<BatchRecords>,
     stochastic: bool,
     /// The loss is divided by this, so optimiser tolerances are relative (L2: mean target^2).
     scale: f64,
@@ -125,6 +128,7 @@ impl<'a> Objective<'a> {
             gradient: GradientMethod::Exact,
             skips: Skips::default(),
             plan: OnceLock::new(),
+            batch: OnceLock::new(),
             stochastic,
             scale,
             evaluations: Arc::new(AtomicUsize::new(0)),
@@ -177,6 +181,20 @@ impl<'a> Objective<'a> {
             let model = (space.model, space.ndf, space.height, self.stochastic);
             RenderPlan::new(self.skips, model, self.records, &self.pixels)
         })
+    }
+
+    /// The batch kernel's records of the loss pixels, built on first use.
+    fn batch(&self) -> &BatchRecords {
+        self.batch
+            .get_or_init(|| BatchRecords::new(self.records, &self.pixels))
+    }
+
+    /// Whether a render at `single`'s roughness is the single-bounce and diffuse terms only
+    /// (the model is `single`, or the plan skips the multiple-bounce term there): then the
+    /// batch kernel renders it, and every seed's render is the same.
+    fn single_only<T: Real>(&self, single: &crate::bsdf::single::SingleBounce<T>) -> bool {
+        self.space.model == crate::bsdf::Model::Single
+            || matches!(self.plan().multi_term(single), MultiTerm::Skipped)
     }
 
     /// What the render plan skips, at the roughness of `material`.
@@ -252,6 +270,11 @@ impl<'a> Objective<'a> {
     /// The renders the loss compares at `x`: one, or two on independent streams for a
     /// stochastic model.
     pub fn renders(&self, x: &[f64]) -> Vec<Vec<[f64; 3]>> {
+        let surface = self.space.surface(x);
+        if self.single_only(&surface.single) {
+            let render = self.batch().render(&surface.single, surface.diffuse);
+            return vec![self.exposed(render, surface.exposure); self.seeds.len()];
+        }
         let material = self.space.material(x);
         let exposure = self.space.exposure(x);
         render_material_streams(
@@ -341,7 +364,9 @@ impl<'a> Objective<'a> {
     /// model or the dimension has no dual path. The one match over the dimension picks the
     /// width of the dual numbers.
     pub fn exact_cost_and_gradient(&self, x: &[f64]) -> Option<(f64, Vec<f64>)> {
+        let single_only = self.single_only(&self.space.surface(x).single);
         let (loss, gradient) = match x.len() {
+            _ if single_only => Some(self.batch_pass(x)),
             1 => self.dual_pass::<1>(x),
             2 => self.dual_pass::<2>(x),
             3 => self.dual_pass::<3>(x),
@@ -405,9 +430,95 @@ impl<'a> Objective<'a> {
         Some((value, gradient))
     }
 
+    /// Loss and its gradient at `x` where the render is the single-bounce and diffuse terms
+    /// only: the batch kernel gives each pixel's derivatives by the kernel's parameters in the
+    /// render's own pass, the loss's slopes weight them, and one dual number per coordinate
+    /// carries the parameters' derivatives by the coordinates (`ParamSpace::surface`).
+    fn batch_pass(&self, x: &[f64]) -> (f64, Vec<f64>) {
+        let surface = self.space.surface(x);
+        let (raw, tangents) = self
+            .batch()
+            .render_with_tangents(&surface.single, surface.diffuse);
+        let exposure = surface.exposure;
+        let render: Vec<[f64; 3]> = raw.iter().map(|p| p.map(|v| v * exposure)).collect();
+        let renders = vec![render; self.seeds.len()];
+        let loss = self.image_loss();
+        let (value, slopes) = (
+            loss.renders_value(&renders),
+            loss.renders_gradient(&renders),
+        );
+        // d loss / d (ax, ay, first Fresnel parameter per channel, second per channel,
+        // diffuse per channel, exposure).
+        let mut by = KernelSlopes::default();
+        for slope in &slopes {
+            for (k, dl) in slope.iter().enumerate() {
+                for c in 0..3 {
+                    let d = dl[c] * exposure;
+                    by.ax += d * tangents.ax[k][c];
+                    by.ay += d * tangents.ay[k][c];
+                    by.fresnel_a[c] += d * tangents.fresnel_a[k][c];
+                    by.fresnel_b[c] += d * tangents.fresnel_b[k][c];
+                    by.diffuse[c] += d * tangents.diffuse[k][c];
+                    by.exposure += dl[c] * raw[k][c];
+                }
+            }
+        }
+        let gradient = (0..x.len())
+            .map(|i| {
+                let coords: Vec<Dual64> = x
+                    .iter()
+                    .enumerate()
+                    .map(|(j, &v)| {
+                        let v = Dual64::from_re(v);
+                        if i == j {
+                            v.derivative()
+                        } else {
+                            v
+                        }
+                    })
+                    .collect();
+                by.along(&self.space.surface(&coords))
+            })
+            .collect();
+        (value, gradient)
+    }
+
     /// Undo the normalisation of a cost reported by the optimiser.
     pub fn loss_from_cost(&self, cost: f64) -> f64 {
         cost * self.scale
+    }
+}
+
+/// Derivatives of a loss by the parameters of the batch kernel (see
+/// [`crate::render::batch::PixelTangents`]) and by the exposure.
+#[derive(Default)]
+struct KernelSlopes {
+    ax: f64,
+    ay: f64,
+    fresnel_a: [f64; 3],
+    fresnel_b: [f64; 3],
+    diffuse: [f64; 3],
+    exposure: f64,
+}
+
+impl KernelSlopes {
+    /// The loss's derivative along the direction whose effect on the parameters is the
+    /// derivative part of `surface`.
+    fn along(&self, surface: &crate::fit::params::Surface<Dual64>) -> f64 {
+        use crate::microfacet::Fresnel;
+        let mf = &surface.single.microfacet;
+        let mut sum = self.ax * mf.ax.eps + self.ay * mf.ay.eps;
+        let (a, b) = match surface.single.fresnel {
+            Fresnel::Schlick { f0 } => (f0.0.map(|v| v.eps), [0.0; 3]),
+            Fresnel::Conductor { eta, k } => (eta.0.map(|v| v.eps), k.0.map(|v| v.eps)),
+            Fresnel::White | Fresnel::Dielectric { .. } => ([0.0; 3], [0.0; 3]),
+        };
+        for c in 0..3 {
+            sum += self.fresnel_a[c] * a[c]
+                + self.fresnel_b[c] * b[c]
+                + self.diffuse[c] * surface.diffuse[c].eps;
+        }
+        sum + self.exposure * surface.exposure.eps
     }
 }
 

@@ -14,6 +14,7 @@
 //! changes separately (variable projection interpolates it across F0 nodes).
 
 pub mod anchors;
+pub mod batch;
 pub mod plan;
 pub mod repeated;
 

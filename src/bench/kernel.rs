@@ -1,0 +1,147 @@
+//! The kernel figure of `bouncefit bench` (issue #15 item 1): time per evaluation of `single`
+//! (GGX, height-correlated, copper conductor, alpha 0.3) by the scalar reference kernel and by
+//! the batch kernel ([`crate::render::batch`]) on the same direction pairs, one thread, in the
+//! same run; the ratio is the figure to quote.
+//!
+//! | field | definition |
+//! | --- | --- |
+//! | `pairs` | direction pairs: the estimator table's configurations ([`super::estimators::configurations`]), as many as the table has times [`PAIRS_PER_CONFIGURATION`] |
+//! | `scalar_ns_per_eval` | thread CPU time per [`crate::bsdf::Brdf::eval`] of `single` |
+//! | `batch_ns_per_eval` | thread CPU time per pair of [`BatchRecords::render`] (one record per pixel), geometry prepared once as a fit prepares it |
+//! | `batch_prepare_ns_per_eval` | thread CPU time per pair of [`BatchRecords::new`]: the one-off cost, for comparison with kernels that take raw direction pairs |
+//! | `speedup` | `scalar_ns_per_eval / batch_ns_per_eval` |
+
+use super::cpu_time::thread_seconds;
+use super::estimators::{configurations, COPPER};
+use crate::albedo::rng_stream;
+use crate::bsdf::Model;
+use crate::material::Material;
+use crate::microfacet::{Height, NdfKind};
+use crate::render::batch::BatchRecords;
+use crate::scalar::Vec3;
+use crate::shading::{PhotoSpan, ShadingRecords};
+use serde::Serialize;
+use std::hint::black_box;
+use std::time::Instant;
+
+/// Direction pairs per configuration of the estimator table: enough pairs that the batch
+/// timing is of the arithmetic, not of one call's overhead.
+pub const PAIRS_PER_CONFIGURATION: usize = 256;
+
+/// The kernel row of the bench report (see the module table).
+#[derive(Clone, Debug, Serialize)]
+pub struct KernelRow {
+    pub pairs: usize,
+    pub scalar_ns_per_eval: f64,
+    pub batch_ns_per_eval: f64,
+    pub batch_prepare_ns_per_eval: f64,
+    pub speedup: f64,
+}
+
+/// The material every kernel timing evaluates.
+fn material() -> Material {
+    Material {
+        model: Model::Single,
+        ndf: NdfKind::Ggx,
+        height: Height::Correlated,
+        alpha: [0.3; 2],
+        fresnel: COPPER,
+        diffuse: [0.0; 3],
+    }
+}
+
+/// One pixel per pair, one sub-sample each, unit irradiance.
+fn records(pairs: usize, seed: u64) -> ShadingRecords {
+    let configs = configurations(pairs, seed);
+    ShadingRecords {
+        photos: vec![PhotoSpan {
+            stem: "kernel".into(),
+            width: pairs,
+            height: 1,
+            first_pixel: 0,
+        }],
+        samples_per_pixel: 1,
+        wi: configs.iter().map(|c| [c.wi.x, c.wi.y, c.wi.z]).collect(),
+        wo: configs.iter().map(|c| [c.wo.x, c.wo.y, c.wo.z]).collect(),
+        irradiance: vec![[1.0; 3]; pairs],
+        target: vec![[0.0; 3]; pairs],
+        weight: vec![1.0; pairs],
+        ..ShadingRecords::default()
+    }
+}
+
+/// Thread CPU ns per pair of `work` over `pairs` pairs, repeated for at least `seconds`.
+fn per_pair(pairs: usize, seconds: f64, mut work: impl FnMut()) -> f64 {
+    work();
+    let (wall, cpu) = (Instant::now(), thread_seconds());
+    let mut passes = 0usize;
+    while passes == 0 || wall.elapsed().as_secs_f64() < seconds {
+        work();
+        passes += 1;
+    }
+    (thread_seconds() - cpu) * 1e9 / (passes * pairs) as f64
+}
+
+/// Measure the kernel row on `configurations * PAIRS_PER_CONFIGURATION` pairs, each timing
+/// repeated for at least `seconds`, on one thread.
+pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
+    let pairs = configurations * PAIRS_PER_CONFIGURATION;
+    let records = records(pairs, seed);
+    let all: Vec<usize> = (0..pairs).collect();
+    let material = material();
+    let single = material.single::<f64>();
+    let brdf = material.brdf();
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a one-thread pool");
+    one_thread.install(|| {
+        let mut rng = rng_stream(seed, 0);
+        let scalar = per_pair(pairs, seconds, || {
+            for (wi, wo) in records.wi.iter().zip(&records.wo) {
+                let (wi, wo) = (
+                    Vec3::from_f64(black_box(*wi)),
+                    Vec3::from_f64(black_box(*wo)),
+                );
+                black_box(brdf.eval(wi, wo, &mut rng));
+            }
+        });
+        let batch = BatchRecords::new(&records, &all);
+        let batch_ns = per_pair(pairs, seconds, || {
+            black_box(batch.render(black_box(&single), [0.0; 3]));
+        });
+        let prepare = per_pair(pairs, seconds, || {
+            black_box(BatchRecords::new(black_box(&records), &all));
+        });
+        KernelRow {
+            pairs,
+            scalar_ns_per_eval: scalar,
+            batch_ns_per_eval: batch_ns,
+            batch_prepare_ns_per_eval: prepare,
+            speedup: scalar / batch_ns,
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_kernel_row_times_the_same_values_both_ways() {
+        let records = records(512, 1);
+        let all: Vec<usize> = (0..512).collect();
+        let material = material();
+        let batch = BatchRecords::new(&records, &all).render(&material.single(), [0.0; 3]);
+        let scalar = crate::render::render_pixels(&material, &records, &all, 0);
+        assert_eq!(batch.len(), scalar.len());
+        for (b, s) in batch.iter().zip(&scalar) {
+            for c in 0..3 {
+                assert!((b[c] - s[c]).abs() <= 1e-12 * s[c].abs().max(1e-300));
+            }
+        }
+        let row = measure(2, 0.0, 1);
+        assert_eq!(row.pairs, 2 * PAIRS_PER_CONFIGURATION);
+        assert!(row.batch_ns_per_eval > 0.0 && row.scalar_ns_per_eval > 0.0);
+    }
+}
