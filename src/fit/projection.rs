@@ -19,6 +19,7 @@ use super::objective::Objective;
 use super::params::{logit, sigmoid, FresnelFamily};
 use crate::bsdf::Model;
 use crate::render::{add_to, lambertian_pixels, SplitRender};
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Degree in F0 of the prediction's polynomial model (see the module docs).
@@ -32,6 +33,9 @@ pub fn fresnel_degree(model: Model) -> usize {
 
 /// Most F0 nodes of any model: `fresnel_degree + 1`.
 const MAX_NODES: usize = 5;
+
+/// Loss pixels per parallel chunk of the moment sums.
+const MOMENT_CHUNK: usize = 4096;
 
 /// Grid of the F0 scan before golden-section refinement.
 const F0_SCAN: usize = 201;
@@ -68,6 +72,19 @@ struct Moments {
 }
 
 impl Moments {
+    /// The moments of two disjoint pixel sets together.
+    fn add(mut self, other: Moments) -> Moments {
+        for (row, other) in self.aa.iter_mut().zip(&other.aa) {
+            row.iter_mut().zip(other).for_each(|(a, b)| *a += b);
+        }
+        self.at.iter_mut().zip(&other.at).for_each(|(a, b)| *a += b);
+        self.ad.iter_mut().zip(&other.ad).for_each(|(a, b)| *a += b);
+        self.tt += other.tt;
+        self.dd += other.dd;
+        self.dt += other.dt;
+        self
+    }
+
     /// `(squared error, rho)` at F0 = `f`, with rho optimal in [0, 1].
     fn error(&self, f: f64) -> (f64, f64) {
         let powers: Vec<f64> = (0..self.at.len()).map(|j| f.powi(j as i32)).collect();
@@ -256,53 +273,78 @@ impl<'o, 'r> Projection<'o, 'r> {
         renders
     }
 
+    /// The moments of channel `c` over the loss pixels `pixels` (see [`Moments`]).
+    fn moments(
+        &self,
+        c: usize,
+        pixels: std::ops::Range<usize>,
+        renders: &[Vec<Vec<[f64; 3]>>],
+        target: &[[f64; 3]],
+    ) -> Moments {
+        let k = self.nodes.len();
+        let streams = renders[0].len();
+        let mut m = Moments {
+            aa: vec![vec![0.0; k]; k],
+            at: vec![0.0; k],
+            ad: vec![0.0; k],
+            tt: 0.0,
+            dd: 0.0,
+            dt: 0.0,
+        };
+        for p in pixels {
+            let v = self.weights[p][c];
+            if v == 0.0 {
+                continue;
+            }
+            // Monomial coefficients of the stream's polynomial: the node values times the
+            // inverse Vandermonde matrix.
+            let coefficients = |stream: usize| {
+                let mut a = [0.0; MAX_NODES];
+                for (lagrange, r) in self.lagrange.iter().zip(renders) {
+                    let y = r[stream][p][c];
+                    a.iter_mut().zip(lagrange).for_each(|(a, l)| *a += l * y);
+                }
+                a
+            };
+            let (a1, a2) = (coefficients(0), coefficients(streams - 1));
+            let (t, d) = (target[p][c], self.diffuse.as_ref().map_or(0.0, |d| d[p][c]));
+            for j in 0..k {
+                let a = 0.5 * (a1[j] + a2[j]);
+                m.at[j] += v * a * t;
+                m.ad[j] += v * a * d;
+                for l in 0..k {
+                    m.aa[j][l] += v * 0.5 * (a1[j] * a2[l] + a2[j] * a1[l]);
+                }
+            }
+            m.tt += v * t * t;
+            m.dd += v * d * d;
+            m.dt += v * d * t;
+        }
+        m
+    }
+
     /// The loss minimised over F0 and diffuse at roughness coordinates `roughness`, and the
     /// full coordinates of that minimum.
     pub fn solve(&self, roughness: &[f64]) -> (f64, Vec<f64>) {
         self.renders.fetch_add(self.nodes.len(), Ordering::Relaxed);
         let renders = self.node_renders(roughness);
-        let streams = renders[0].len();
         let target = self.objective.targets();
-        let k = self.nodes.len();
         let (mut f0, mut rho, mut loss) = ([0.0; 3], [0.0; 3], 0.0);
         for c in 0..3 {
-            let mut m = Moments {
-                aa: vec![vec![0.0; k]; k],
-                at: vec![0.0; k],
-                ad: vec![0.0; k],
-                tt: 0.0,
-                dd: 0.0,
-                dt: 0.0,
-            };
-            for (p, v) in self.weights.iter().enumerate() {
-                let v = v[c];
-                if v == 0.0 {
-                    continue;
-                }
-                // Monomial coefficients of the stream's polynomial: the node values times the
-                // inverse Vandermonde matrix.
-                let coefficients = |stream: usize| {
-                    let mut a = [0.0; MAX_NODES];
-                    for (lagrange, r) in self.lagrange.iter().zip(&renders) {
-                        let y = r[stream][p][c];
-                        a.iter_mut().zip(lagrange).for_each(|(a, l)| *a += l * y);
-                    }
-                    a
-                };
-                let (a1, a2) = (coefficients(0), coefficients(streams - 1));
-                let (t, d) = (target[p][c], self.diffuse.as_ref().map_or(0.0, |d| d[p][c]));
-                for j in 0..k {
-                    let a = 0.5 * (a1[j] + a2[j]);
-                    m.at[j] += v * a * t;
-                    m.ad[j] += v * a * d;
-                    for l in 0..k {
-                        m.aa[j][l] += v * 0.5 * (a1[j] * a2[l] + a2[j] * a1[l]);
-                    }
-                }
-                m.tt += v * t * t;
-                m.dd += v * d * d;
-                m.dt += v * d * t;
-            }
+            // Pixel chunks in parallel, their moments added in chunk order: the same sums for
+            // any thread count.
+            let m = (0..self.weights.len())
+                .step_by(MOMENT_CHUNK)
+                .collect::<Vec<_>>()
+                .par_iter()
+                .map(|&start| {
+                    let end = (start + MOMENT_CHUNK).min(self.weights.len());
+                    self.moments(c, start..end, &renders, target)
+                })
+                .collect::<Vec<_>>()
+                .into_iter()
+                .reduce(Moments::add)
+                .expect("at least one pixel");
             let (f, r, e) = m.minimise();
             (f0[c], rho[c], loss) = (f, r, loss + e);
         }
