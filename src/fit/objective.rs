@@ -17,11 +17,13 @@
 
 use super::params::ParamSpace;
 use crate::bsdf::{differentiable, BounceCap};
+use crate::fit::params::Surface;
 use crate::loss::{ImageLayout, Loss, LossKind};
-use crate::render::batch::BatchRecords;
+use crate::render::anchors::Anchors;
+use crate::render::batch::{BatchRecords, PixelTangents};
 use crate::render::plan::{MultiTerm, PlanSummary, RenderPlan, Skips};
 use crate::render::{
-    render_material, render_material_streams, render_planned_split, render_planned_streams,
+    add_to, render_material, render_material_streams, render_planned_split, render_planned_streams,
     SplitRender,
 };
 use crate::scalar::Real;
@@ -197,6 +199,42 @@ impl<'a> Objective<'a> {
             || matches!(self.plan().multi_term(single), MultiTerm::Skipped)
     }
 
+    /// The single-bounce and diffuse terms of the loss pixels from the batch kernel (and their
+    /// tangents when `tangents`), zero at the pixels `anchors` leaves to an exact evaluation:
+    /// the part of a render through anchors that no random stream changes
+    /// ([`render_planned_split`]'s `shared`).
+    fn batch_shared(
+        &self,
+        surface: &Surface<f64>,
+        anchors: &Anchors,
+        tangents: bool,
+    ) -> (Vec<[f64; 3]>, Option<PixelTangents>) {
+        let batch = self.batch();
+        let (mut values, mut t) = if tangents {
+            let (v, t) = batch.render_with_tangents(&surface.single, surface.diffuse);
+            (v, Some(t))
+        } else {
+            (batch.render(&surface.single, surface.diffuse), None)
+        };
+        for (k, corners) in anchors.corners.iter().enumerate() {
+            if corners.is_none() {
+                values[k] = [0.0; 3];
+                if let Some(t) = &mut t {
+                    for lane in [
+                        &mut t.ax,
+                        &mut t.ay,
+                        &mut t.fresnel_a,
+                        &mut t.fresnel_b,
+                        &mut t.diffuse,
+                    ] {
+                        lane[k] = [0.0; 3];
+                    }
+                }
+            }
+        }
+        (values, t)
+    }
+
     /// What the render plan skips, at the roughness of `material`.
     pub fn plan_summary(&self, material: &crate::material::Material) -> PlanSummary {
         self.plan().summary(material)
@@ -275,6 +313,17 @@ impl<'a> Objective<'a> {
             let render = self.batch().render(&surface.single, surface.diffuse);
             return vec![self.exposed(render, surface.exposure); self.seeds.len()];
         }
+        if let Some(split) = self.render_split(x, true) {
+            let shared = split.shared.expect("asked for");
+            return split
+                .own
+                .into_iter()
+                .map(|mut own| {
+                    add_to(&mut own, &shared);
+                    own
+                })
+                .collect();
+        }
         let material = self.space.material(x);
         let exposure = self.space.exposure(x);
         render_material_streams(
@@ -292,26 +341,29 @@ impl<'a> Objective<'a> {
     /// [`Objective::renders`] at `x` split as [`render_planned_split`] splits them (the shared
     /// part only when `shared`), or `None` when the plan does not interpolate at this roughness.
     pub fn render_split(&self, x: &[f64], shared: bool) -> Option<SplitRender<f64>> {
+        let surface = self.space.surface(x);
+        let MultiTerm::Sparse(anchors) = self.plan().multi_term(&surface.single) else {
+            return None;
+        };
         let material = self.space.material(x);
-        let exposure = self.space.exposure(x);
         let single = material.single::<f64>();
         let brdf = material.capped_brdf(self.plan().bounce_cap(&single));
-        let diffuse = shared.then_some(material.diffuse);
         let split = render_planned_split(
             brdf.as_ref(),
             &single,
-            diffuse,
+            None,
             self.records,
             &self.pixels,
             self.plan(),
             &self.seeds,
         )?;
+        let shared = shared.then(|| self.batch_shared(&surface, anchors, false).0);
         Some(SplitRender {
-            shared: split.shared.map(|r| self.exposed(r, exposure)),
+            shared: shared.map(|r| self.exposed(r, surface.exposure)),
             own: split
                 .own
                 .into_iter()
-                .map(|r| self.exposed(r, exposure))
+                .map(|r| self.exposed(r, surface.exposure))
                 .collect(),
         })
     }
@@ -396,6 +448,41 @@ impl<'a> Objective<'a> {
         let surface = self.space.surface(&coords);
         let cap = self.plan().bounce_cap(&surface.single);
         let brdf = differentiable(self.space.model, surface.single, cap)?;
+        let at = self.space.surface(x);
+        if let MultiTerm::Sparse(anchors) = self.plan().multi_term(&at.single) {
+            // The exact single-bounce and diffuse terms from the batch kernel, the rest (the
+            // interpolated multiple-bounce term and the pixels without anchors) in dual numbers.
+            let split = render_planned_split(
+                brdf.as_ref(),
+                &surface.single,
+                None,
+                self.records,
+                &self.pixels,
+                self.plan(),
+                &self.seeds,
+            )?;
+            let (shared, tangents) = self.batch_shared(&at, anchors, true);
+            let tangents = tangents.expect("asked for");
+            let own: Vec<Vec<[DualSVec64<N>; 3]>> = split
+                .own
+                .into_iter()
+                .map(|r| self.exposed(r, surface.exposure))
+                .collect();
+            let values: Vec<Vec<[f64; 3]>> = own
+                .iter()
+                .map(|r| {
+                    r.iter()
+                        .zip(&shared)
+                        .map(|(p, s)| [0, 1, 2].map(|c| p[c].re + s[c] * at.exposure))
+                        .collect()
+                })
+                .collect();
+            let loss = self.image_loss();
+            let (value, slopes) = (loss.renders_value(&values), loss.renders_gradient(&values));
+            let mut gradient = self.batch_gradient(x, &slopes, &shared, &tangents, at.exposure);
+            add_dual_slopes::<N>(&mut gradient, &own, &slopes);
+            return Some((value, gradient));
+        }
         let renders: Vec<Vec<[DualSVec64<N>; 3]>> = render_planned_streams(
             brdf.as_ref(),
             &surface.single,
@@ -415,18 +502,7 @@ impl<'a> Objective<'a> {
         let loss = self.image_loss();
         let (value, slopes) = (loss.renders_value(&values), loss.renders_gradient(&values));
         let mut gradient = vec![0.0; N];
-        for (render, slope) in renders.iter().zip(&slopes) {
-            for (p, dl) in render.iter().zip(slope) {
-                for c in 0..3 {
-                    if let Some(dp) = &p[c].eps.0 {
-                        gradient
-                            .iter_mut()
-                            .zip(dp.iter())
-                            .for_each(|(g, d)| *g += dl[c] * d);
-                    }
-                }
-            }
-        }
+        add_dual_slopes::<N>(&mut gradient, &renders, &slopes);
         Some((value, gradient))
     }
 
@@ -439,18 +515,35 @@ impl<'a> Objective<'a> {
         let (raw, tangents) = self
             .batch()
             .render_with_tangents(&surface.single, surface.diffuse);
-        let exposure = surface.exposure;
-        let render: Vec<[f64; 3]> = raw.iter().map(|p| p.map(|v| v * exposure)).collect();
+        let render: Vec<[f64; 3]> = raw
+            .iter()
+            .map(|p| p.map(|v| v * surface.exposure))
+            .collect();
         let renders = vec![render; self.seeds.len()];
         let loss = self.image_loss();
         let (value, slopes) = (
             loss.renders_value(&renders),
             loss.renders_gradient(&renders),
         );
-        // d loss / d (ax, ay, first Fresnel parameter per channel, second per channel,
-        // diffuse per channel, exposure).
+        let gradient = self.batch_gradient(x, &slopes, &raw, &tangents, surface.exposure);
+        (value, gradient)
+    }
+
+    /// The gradient by the coordinates `x` of a loss with slopes `slopes` (one per render)
+    /// through a batch-kernel part `raw` (unexposed) with tangents `tangents` that every render
+    /// contains: the slopes weight the pixel tangents into derivatives by the kernel's
+    /// parameters, and one dual number per coordinate carries those through
+    /// `ParamSpace::surface`.
+    fn batch_gradient(
+        &self,
+        x: &[f64],
+        slopes: &[Vec<[f64; 3]>],
+        raw: &[[f64; 3]],
+        tangents: &PixelTangents,
+        exposure: f64,
+    ) -> Vec<f64> {
         let mut by = KernelSlopes::default();
-        for slope in &slopes {
+        for slope in slopes {
             for (k, dl) in slope.iter().enumerate() {
                 for c in 0..3 {
                     let d = dl[c] * exposure;
@@ -463,7 +556,7 @@ impl<'a> Objective<'a> {
                 }
             }
         }
-        let gradient = (0..x.len())
+        (0..x.len())
             .map(|i| {
                 let coords: Vec<Dual64> = x
                     .iter()
@@ -479,13 +572,33 @@ impl<'a> Objective<'a> {
                     .collect();
                 by.along(&self.space.surface(&coords))
             })
-            .collect();
-        (value, gradient)
+            .collect()
     }
 
     /// Undo the normalisation of a cost reported by the optimiser.
     pub fn loss_from_cost(&self, cost: f64) -> f64 {
         cost * self.scale
+    }
+}
+
+/// `gradient += sum over renders, pixels and channels of slope * d render / d x`, the
+/// derivatives being the dual parts of `renders`.
+fn add_dual_slopes<const N: usize>(
+    gradient: &mut [f64],
+    renders: &[Vec<[DualSVec64<N>; 3]>],
+    slopes: &[Vec<[f64; 3]>],
+) {
+    for (render, slope) in renders.iter().zip(slopes) {
+        for (p, dl) in render.iter().zip(slope) {
+            for c in 0..3 {
+                if let Some(dp) = &p[c].eps.0 {
+                    gradient
+                        .iter_mut()
+                        .zip(dp.iter())
+                        .for_each(|(g, d)| *g += dl[c] * d);
+                }
+            }
+        }
     }
 }
 
@@ -504,7 +617,7 @@ struct KernelSlopes {
 impl KernelSlopes {
     /// The loss's derivative along the direction whose effect on the parameters is the
     /// derivative part of `surface`.
-    fn along(&self, surface: &crate::fit::params::Surface<Dual64>) -> f64 {
+    fn along(&self, surface: &Surface<Dual64>) -> f64 {
         use crate::microfacet::Fresnel;
         let mf = &surface.single.microfacet;
         let mut sum = self.ax * mf.ax.eps + self.ay * mf.ay.eps;
