@@ -200,8 +200,8 @@ impl<'a> Objective<'a> {
     }
 
     /// The single-bounce and diffuse terms of the loss pixels from the batch kernel (and their
-    /// tangents when `tangents`), zero at the pixels `anchors` leaves to an exact evaluation:
-    /// the part of a render through anchors that no random stream changes
+    /// tangents when `tangents`), without the single-bounce term at the pixels `anchors` leaves
+    /// to an exact evaluation: the part of a render through anchors that no random stream changes
     /// ([`render_planned_split`]'s `shared`).
     fn batch_shared(
         &self,
@@ -216,17 +216,13 @@ impl<'a> Objective<'a> {
         } else {
             (batch.render(&surface.single, surface.diffuse), None)
         };
+        // Pixels without anchors keep only the diffuse term here: their specular value is
+        // evaluated whole with the multiple-bounce term.
         for (k, corners) in anchors.corners.iter().enumerate() {
             if corners.is_none() {
-                values[k] = [0.0; 3];
+                values[k] = [0, 1, 2].map(|c| surface.diffuse[c] * batch.lambert()[k][c]);
                 if let Some(t) = &mut t {
-                    for lane in [
-                        &mut t.ax,
-                        &mut t.ay,
-                        &mut t.fresnel_a,
-                        &mut t.fresnel_b,
-                        &mut t.diffuse,
-                    ] {
+                    for lane in [&mut t.ax, &mut t.ay, &mut t.fresnel_a, &mut t.fresnel_b] {
                         lane[k] = [0.0; 3];
                     }
                 }

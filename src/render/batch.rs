@@ -179,6 +179,12 @@ impl BatchRecords {
         self.lambert.len()
     }
 
+    /// Per pixel: the radiance of a white Lambertian layer, the sum over its sub-samples of
+    /// irradiance / (pi spp).
+    pub fn lambert(&self) -> &[[f64; 3]] {
+        &self.lambert
+    }
+
     /// Number of records the kernel evaluates per render.
     pub fn record_count(&self) -> usize {
         self.hx2.len()

@@ -230,7 +230,7 @@ pub struct SplitRender<T> {
 
 /// The multiple-bounce estimate at every anchor of `anchors`, each from a stream of its own
 /// (the mean of `spp` draws for a stochastic model, one evaluation otherwise).
-fn anchor_values<T: Real, B: ScalarBrdf<T> + ?Sized>(
+pub fn anchor_values<T: Real, B: ScalarBrdf<T> + ?Sized>(
     brdf: &B,
     anchors: &anchors::Anchors,
     stochastic: bool,
