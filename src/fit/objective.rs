@@ -16,6 +16,7 @@
 //! variance and pull the fit towards less multiple scattering.
 
 use super::params::ParamSpace;
+use crate::bsdf::ScalarBrdf;
 use crate::bsdf::{differentiable, BounceCap};
 use crate::fit::params::Surface;
 use crate::loss::{ImageLayout, Loss, LossKind};
@@ -23,14 +24,16 @@ use crate::render::anchors::Anchors;
 use crate::render::batch::{BatchRecords, PixelTangents};
 use crate::render::plan::{MultiTerm, PlanSummary, RenderPlan, Skips};
 use crate::render::{
-    add_to, render_material, render_material_streams, render_planned_split, render_planned_streams,
-    SplitRender,
+    add_to, render_material, render_material_streams, render_planned_streams, SplitRender,
 };
-use crate::scalar::Real;
+use crate::render::{anchor_values, render_model};
+use crate::scalar::{Real, Rgb};
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Error as ArgminError, Gradient};
 use num_dual::{Dual64, DualSVec64};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -202,7 +205,7 @@ impl<'a> Objective<'a> {
     /// The single-bounce and diffuse terms of the loss pixels from the batch kernel (and their
     /// tangents when `tangents`), without the single-bounce term at the pixels `anchors` leaves
     /// to an exact evaluation: the part of a render through anchors that no random stream changes
-    /// ([`render_planned_split`]'s `shared`).
+    /// ([`crate::render::render_planned_split`]'s `shared`).
     fn batch_shared(
         &self,
         surface: &Surface<f64>,
@@ -229,6 +232,54 @@ impl<'a> Objective<'a> {
             }
         }
         (values, t)
+    }
+
+    /// The per-seed part of a render through `anchors` at `seed`, unexposed: the interpolated
+    /// multiple-bounce term at the pixels with anchors and the whole specular value (no
+    /// diffuse) at the pixels without. The interpolated term is the same at every sub-sample of
+    /// a pixel, so its sub-sample sum is `pi lambert_k sum_a w_ka multi_a` with the pixel's
+    /// white Lambertian radiance `lambert_k`: linear in the anchors' values, which is what lets
+    /// the gradient pass carry derivatives at the anchors only ([`Objective::dual_pass`]).
+    fn anchored_part<T: Real, B: ScalarBrdf<T> + ?Sized>(
+        &self,
+        brdf: &B,
+        anchors: &Anchors,
+        seed: u64,
+    ) -> AnchoredPart<T> {
+        let spp = self.records.samples_per_pixel;
+        let multi = anchor_values(brdf, anchors, self.plan().stochastic, spp, seed);
+        let exact_slots: Vec<usize> = (0..anchors.corners.len())
+            .filter(|&k| anchors.corners[k].is_none())
+            .collect();
+        let exact_pixels: Vec<usize> = exact_slots.iter().map(|&k| self.pixels[k]).collect();
+        let exact_values = render_model(brdf, [T::zero(); 3], self.records, &exact_pixels, seed);
+        let multi_re: Vec<[f64; 3]> = multi.iter().map(|m| m.0.map(|v| v.re64())).collect();
+        let lambert = self.batch().lambert();
+        let mut own: Vec<[f64; 3]> = anchors
+            .corners
+            .par_iter()
+            .zip(lambert.par_iter())
+            .map(|(corners, lambert)| match corners {
+                Some(corners) => {
+                    let mut sum = [0.0; 3];
+                    for &(a, w) in corners {
+                        for c in 0..3 {
+                            sum[c] += w * multi_re[a as usize][c];
+                        }
+                    }
+                    [0, 1, 2].map(|c| sum[c] * PI * lambert[c])
+                }
+                None => [0.0; 3],
+            })
+            .collect();
+        for (&k, value) in exact_slots.iter().zip(&exact_values) {
+            own[k] = value.map(|v| v.re64());
+        }
+        AnchoredPart {
+            multi,
+            exact: exact_slots.into_iter().zip(exact_values).collect(),
+            own,
+        }
     }
 
     /// What the render plan skips, at the roughness of `material`.
@@ -334,7 +385,7 @@ impl<'a> Objective<'a> {
         .collect()
     }
 
-    /// [`Objective::renders`] at `x` split as [`render_planned_split`] splits them (the shared
+    /// [`Objective::renders`] at `x` split as [`crate::render::render_planned_split`] splits them (the shared
     /// part only when `shared`), or `None` when the plan does not interpolate at this roughness.
     pub fn render_split(&self, x: &[f64], shared: bool) -> Option<SplitRender<f64>> {
         let surface = self.space.surface(x);
@@ -344,15 +395,14 @@ impl<'a> Objective<'a> {
         let material = self.space.material(x);
         let single = material.single::<f64>();
         let brdf = material.capped_brdf(self.plan().bounce_cap(&single));
-        let split = render_planned_split(
-            brdf.as_ref(),
-            &single,
-            None,
-            self.records,
-            &self.pixels,
-            self.plan(),
-            &self.seeds,
-        )?;
+        let split = SplitRender {
+            shared: None,
+            own: self
+                .seeds
+                .iter()
+                .map(|&seed| self.anchored_part(brdf.as_ref(), anchors, seed).own)
+                .collect(),
+        };
         let shared = shared.then(|| self.batch_shared(&surface, anchors, false).0);
         Some(SplitRender {
             shared: shared.map(|r| self.exposed(r, surface.exposure)),
@@ -446,37 +496,57 @@ impl<'a> Objective<'a> {
         let brdf = differentiable(self.space.model, surface.single, cap)?;
         let at = self.space.surface(x);
         if let MultiTerm::Sparse(anchors) = self.plan().multi_term(&at.single) {
-            // The exact single-bounce and diffuse terms from the batch kernel, the rest (the
-            // interpolated multiple-bounce term and the pixels without anchors) in dual numbers.
-            let split = render_planned_split(
-                brdf.as_ref(),
-                &surface.single,
-                None,
-                self.records,
-                &self.pixels,
-                self.plan(),
-                &self.seeds,
-            )?;
+            // The exact single-bounce and diffuse terms from the batch kernel with their
+            // tangents; the rest is linear in the anchors' values, so the loss's slopes are
+            // carried back to the anchors (an adjoint) and only the anchors and the pixels
+            // without anchors are evaluated in dual numbers.
             let (shared, tangents) = self.batch_shared(&at, anchors, true);
             let tangents = tangents.expect("asked for");
-            let own: Vec<Vec<[DualSVec64<N>; 3]>> = split
-                .own
-                .into_iter()
-                .map(|r| self.exposed(r, surface.exposure))
-                .collect();
-            let values: Vec<Vec<[f64; 3]>> = own
+            let parts: Vec<AnchoredPart<DualSVec64<N>>> = self
+                .seeds
                 .iter()
-                .map(|r| {
-                    r.iter()
-                        .zip(&shared)
-                        .map(|(p, s)| [0, 1, 2].map(|c| p[c].re + s[c] * at.exposure))
-                        .collect()
+                .map(|&seed| self.anchored_part(brdf.as_ref(), anchors, seed))
+                .collect();
+            let raws: Vec<Vec<[f64; 3]>> = parts
+                .iter()
+                .map(|part| {
+                    let mut raw = part.own.clone();
+                    add_to(&mut raw, &shared);
+                    raw
                 })
+                .collect();
+            let values: Vec<Vec<[f64; 3]>> = raws
+                .iter()
+                .map(|raw| raw.iter().map(|p| p.map(|v| v * at.exposure)).collect())
                 .collect();
             let loss = self.image_loss();
             let (value, slopes) = (loss.renders_value(&values), loss.renders_gradient(&values));
-            let mut gradient = self.batch_gradient(x, &slopes, &shared, &tangents, at.exposure);
-            add_dual_slopes::<N>(&mut gradient, &own, &slopes);
+            let raw_refs: Vec<&[[f64; 3]]> = raws.iter().map(|r| r.as_slice()).collect();
+            let mut gradient = self.batch_gradient(x, &slopes, &raw_refs, &tangents, at.exposure);
+            let lambert = self.batch().lambert();
+            for (part, slope) in parts.iter().zip(&slopes) {
+                let mut at_anchors = vec![[0.0; 3]; part.multi.len()];
+                for (k, corners) in anchors.corners.iter().enumerate() {
+                    if let Some(corners) = corners {
+                        for &(a, w) in corners {
+                            for c in 0..3 {
+                                at_anchors[a as usize][c] +=
+                                    slope[k][c] * at.exposure * PI * lambert[k][c] * w;
+                            }
+                        }
+                    }
+                }
+                let anchor_duals: Vec<[DualSVec64<N>; 3]> =
+                    part.multi.iter().map(|m| m.0).collect();
+                add_dual_slopes::<N>(&mut gradient, &[anchor_duals], &[at_anchors]);
+                let (slots, exact): (Vec<usize>, Vec<[DualSVec64<N>; 3]>) =
+                    part.exact.iter().cloned().unzip();
+                let exact_slopes: Vec<[f64; 3]> = slots
+                    .iter()
+                    .map(|&k| slope[k].map(|d| d * at.exposure))
+                    .collect();
+                add_dual_slopes::<N>(&mut gradient, &[exact], &[exact_slopes]);
+            }
             return Some((value, gradient));
         }
         let renders: Vec<Vec<[DualSVec64<N>; 3]>> = render_planned_streams(
@@ -521,25 +591,26 @@ impl<'a> Objective<'a> {
             loss.renders_value(&renders),
             loss.renders_gradient(&renders),
         );
-        let gradient = self.batch_gradient(x, &slopes, &raw, &tangents, surface.exposure);
+        let raws = vec![raw.as_slice(); slopes.len()];
+        let gradient = self.batch_gradient(x, &slopes, &raws, &tangents, surface.exposure);
         (value, gradient)
     }
 
-    /// The gradient by the coordinates `x` of a loss with slopes `slopes` (one per render)
-    /// through a batch-kernel part `raw` (unexposed) with tangents `tangents` that every render
-    /// contains: the slopes weight the pixel tangents into derivatives by the kernel's
+    /// The gradient by the coordinates `x` of a loss with slopes `slopes` (one per render of
+    /// unexposed value `raws`) through a batch-kernel part with tangents `tangents` that every
+    /// render contains, and through the exposure: the slopes weight the pixel tangents into derivatives by the kernel's
     /// parameters, and one dual number per coordinate carries those through
     /// `ParamSpace::surface`.
     fn batch_gradient(
         &self,
         x: &[f64],
         slopes: &[Vec<[f64; 3]>],
-        raw: &[[f64; 3]],
+        raws: &[&[[f64; 3]]],
         tangents: &PixelTangents,
         exposure: f64,
     ) -> Vec<f64> {
         let mut by = KernelSlopes::default();
-        for slope in slopes {
+        for (slope, raw) in slopes.iter().zip(raws) {
             for (k, dl) in slope.iter().enumerate() {
                 for c in 0..3 {
                     let d = dl[c] * exposure;
@@ -575,6 +646,16 @@ impl<'a> Objective<'a> {
     pub fn loss_from_cost(&self, cost: f64) -> f64 {
         cost * self.scale
     }
+}
+
+/// One seed's part of a render through anchors ([`Objective::anchored_part`]).
+struct AnchoredPart<T> {
+    /// The multiple-bounce estimate at each anchor.
+    multi: Vec<Rgb<T>>,
+    /// The pixels without anchors (position in the pixel list) and their specular values.
+    exact: Vec<(usize, [T; 3])>,
+    /// The part at every pixel, in `f64`.
+    own: Vec<[f64; 3]>,
 }
 
 /// `gradient += sum over renders, pixels and channels of slope * d render / d x`, the
