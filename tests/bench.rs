@@ -40,7 +40,7 @@ fn quick_json_has_the_contract_fields_and_consistent_values() {
         repo("datasets/sources/copper-a03.material.json")
             .to_str()
             .unwrap(),
-        "--fit-set",
+        "--fit-sets",
         repo("datasets/copper-flash").to_str().unwrap(),
         "-o",
         out.to_str().unwrap(),
@@ -145,8 +145,27 @@ fn quick_json_has_the_contract_fields_and_consistent_values() {
         assert!(j["seconds"].as_f64().unwrap() > 0.0, "{j}");
         assert_eq!(j["photos"], 9);
     }
+    // The kernel row times the scalar and the batch kernel on the same pairs.
+    let kernel = &v["kernel"];
+    for key in ["scalar_ns_per_eval", "batch_ns_per_eval", "speedup"] {
+        assert!(kernel[key].as_f64().unwrap() > 0.0, "{kernel}");
+    }
     for fit in jobs.iter().filter(|j| j["job"] == "fit") {
         assert_eq!(fit["resolution"], serde_json::json!([4, 4]));
+        assert!(
+            fit["set"].as_str().unwrap().ends_with("copper-flash"),
+            "{fit}"
+        );
+        // Each fit's time over single's on the same set and skip; single's own is 1.
+        let ratio = fit["seconds_vs_single"].as_f64().unwrap();
+        let own = fit["seconds"].as_f64().unwrap();
+        let single = jobs
+            .iter()
+            .find(|j| j["job"] == "fit" && j["model"] == "single" && j["skip"] == fit["skip"])
+            .unwrap()["seconds"]
+            .as_f64()
+            .unwrap();
+        assert!((ratio - own / single).abs() < 1e-12, "{fit}");
         assert!(fit["loss"].as_f64().unwrap() >= 0.0);
         // The bundled set was made by `single` at alpha 0.3; both models find it within 10%
         // even on 4x4 photos.
@@ -167,7 +186,7 @@ fn bad_input_exits_2_before_measuring_and_leaves_no_output() {
         "bench",
         "--quick",
         "--quiet",
-        "--fit-set",
+        "--fit-sets",
         missing.to_str().unwrap(),
         "-o",
         dir.path().join("out").to_str().unwrap(),
@@ -181,6 +200,15 @@ fn bad_input_exits_2_before_measuring_and_leaves_no_output() {
     let err = run_bad(&["bench", "--quick", "--quiet", "-o", taken.to_str().unwrap()]);
     assert!(err.contains("--force"), "{err}");
     assert!(taken.join("keep.txt").exists());
+
+    let flash = repo("datasets/copper-flash");
+    let err = run_bad(&[
+        "bench",
+        "--quick",
+        "--fit-sets",
+        &format!("{}:metal", flash.display()),
+    ]);
+    assert!(err.contains("metal") && err.contains("conductor"), "{err}");
 
     let err = run_bad(&["bench", "--configs", "0"]);
     assert!(err.contains("--configs"), "{err}");

@@ -59,6 +59,10 @@ pub struct JobRow {
     /// Renders with `skip`: RMS difference from the exact render of the same pixels, relative
     /// to its RMS (for stochastic models this includes their noise: the streams differ).
     pub rel_error_vs_exact: Option<f64>,
+    /// Fits: the photo set.
+    pub set: Option<String>,
+    /// Fits: `seconds` over the `single` fit of the same set with the same `skip`.
+    pub seconds_vs_single: Option<f64>,
 }
 
 impl JobRow {
@@ -89,6 +93,8 @@ impl JobRow {
             skipped_pixels: records.pixel_count() - pixels,
             plan: None,
             rel_error_vs_exact: None,
+            set: None,
+            seconds_vs_single: None,
         }
     }
 }
@@ -209,6 +215,21 @@ pub fn relative_rms_difference(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
         }
     }
     (diff / norm.max(f64::MIN_POSITIVE)).sqrt()
+}
+
+/// Set `seconds_vs_single` of the fit rows of one set: each row's time over the `single` row
+/// with the same `skip` (left `None` when `single` was not fitted).
+pub fn ratios_to_single(rows: &mut [JobRow]) {
+    let single = |skip: bool, rows: &[JobRow]| {
+        rows.iter()
+            .find(|r| r.job == JobKind::Fit && r.model == Model::Single && r.skip == skip)
+            .map(|r| r.seconds)
+    };
+    for i in 0..rows.len() {
+        if let Some(base) = single(rows[i].skip, rows) {
+            rows[i].seconds_vs_single = Some(rows[i].seconds / base);
+        }
+    }
 }
 
 /// Fit the model of `options` to `records` and time it.

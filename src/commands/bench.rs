@@ -20,6 +20,7 @@ use crate::bench::plot::error_against_time;
 use crate::bsdf::Model;
 use crate::capture::atomic_file::write_atomically;
 use crate::error::{Error, Result};
+use crate::fit::params::FresnelFamily;
 use crate::fit::FitOptions;
 use crate::material::Material;
 use crate::progress::Progress;
@@ -57,9 +58,16 @@ pub struct BenchArgs {
     /// Side of the render job's square photos (default 256; with --quick 128).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096))]
     pub render_resolution: Option<usize>,
-    /// Photo set of the fit jobs; its `material.json`, if any, gives the true roughness.
-    #[arg(long, default_value = "datasets/copper-flash")]
-    pub fit_set: PathBuf,
+    /// Photo sets of the fit jobs (comma-separated), each `PATH` or `PATH:conductor` /
+    /// `PATH:schlick` to fit that Fresnel family there (otherwise `--fresnel`'s); a set's
+    /// `material.json`, if any, gives the true roughness. By default the rectified flash set and
+    /// the pinhole point-light set with conductor Fresnel.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "datasets/copper-flash,datasets/aluminium-pinhole:conductor"
+    )]
+    pub fit_sets: Vec<FitSet>,
     /// Halve the fit set's resolution this many times first (default 0; with --quick 4).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=8))]
     pub fit_halvings: Option<usize>,
@@ -97,9 +105,34 @@ struct RenderSettings {
     min_seconds: f64,
 }
 
+/// A photo set of the fit jobs and the Fresnel family fitted there (`None`: `--fresnel`'s).
+#[derive(Clone, Debug, Serialize)]
+pub struct FitSet {
+    pub path: PathBuf,
+    pub fresnel: Option<FresnelFamily>,
+}
+
+impl std::str::FromStr for FitSet {
+    type Err = String;
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        let (path, fresnel) = match text.rsplit_once(':') {
+            Some((path, family)) => {
+                let family = <FresnelFamily as clap::ValueEnum>::from_str(family, true)
+                    .map_err(|_| format!("unknown Fresnel family {family:?} after ':' in {text:?} (schlick or conductor)"))?;
+                (path, Some(family))
+            }
+            None => (text, None),
+        };
+        Ok(FitSet {
+            path: PathBuf::from(path),
+            fresnel,
+        })
+    }
+}
+
 #[derive(Clone, Debug, Serialize)]
 struct FitSettings {
-    set: PathBuf,
+    sets: Vec<FitSet>,
     halvings: usize,
     pixel_samples: usize,
     max_iters: u64,
@@ -145,7 +178,7 @@ impl BenchArgs {
                 min_seconds: if quick { 0.0 } else { 1.0 },
             }),
             fit: (!self.no_jobs).then(|| FitSettings {
-                set: self.fit_set.clone(),
+                sets: self.fit_sets.clone(),
                 halvings: self.fit_halvings.unwrap_or(if quick { 4 } else { 0 }),
                 pixel_samples: self.fit.pixel_samples,
                 max_iters: self.fit.max_iters,
@@ -181,8 +214,15 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
         None => None,
     };
     let fit_inputs = match &settings.fit {
-        Some(f) => Some(jobs::fit_records(&f.set, f.pixel_samples, f.halvings)?),
-        None => None,
+        Some(f) => f
+            .sets
+            .iter()
+            .map(|set| {
+                let (records, truth) = jobs::fit_records(&set.path, f.pixel_samples, f.halvings)?;
+                Ok((set, records, truth))
+            })
+            .collect::<Result<Vec<_>>>()?,
+        None => Vec::new(),
     };
 
     let units = estimators::work_units(&settings.models, &settings.estimators);
@@ -224,24 +264,32 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
         }
         finish(&bar);
     }
-    if let Some((records, truth)) = &fit_inputs {
+    for (set, records, truth) in &fit_inputs {
+        let first_row = job_rows.len();
         for &model in &settings.models {
             if !args.quiet {
                 let [w, h] = [records.photos[0].width, records.photos[0].height];
                 eprintln!(
-                    "bench: fit {model} to {} photos of {w}x{h}",
+                    "bench: fit {model} to {} ({} photos of {w}x{h})",
+                    set.path.display(),
                     records.photos.len()
                 );
             }
-            let options = args.fit.fit_options(model, !args.quiet);
+            let mut options = args.fit.fit_options(model, !args.quiet);
+            if let Some(fresnel) = set.fresnel {
+                options.space.fresnel = fresnel;
+            }
             for skips in [Skips::none(), options.skips] {
                 let options = FitOptions {
                     skips,
                     ..options.clone()
                 };
-                job_rows.push(jobs::fit_job(records, truth.as_ref(), &options)?);
+                let mut row = jobs::fit_job(records, truth.as_ref(), &options)?;
+                row.set = Some(set.path.display().to_string());
+                job_rows.push(row);
             }
         }
+        jobs::ratios_to_single(&mut job_rows[first_row..]);
     }
 
     let report = BenchReport {
@@ -321,8 +369,15 @@ fn notes(settings: &Settings, estimators: &[EstimatorRow], jobs: &[JobRow]) -> V
     }
     if let Some(f) = &settings.fit {
         notes.push(format!(
-            "fit: {} halved {} times, {} samples per pixel, at most {} iterations; skip=false is --no-skip all (pixels of weight 0 are never rendered), skip=true every skip of render::plan that --no-skip leaves on; alpha_rel_error is signed, against the set's material.json (the model that made the photos may differ from the fitted one)",
-            f.set.display(),
+            "fit: {} halved {} times, {} samples per pixel, at most {} iterations; skip=false is --no-skip all (pixels of weight 0 are never rendered), skip=true every skip of render::plan that --no-skip leaves on; alpha_rel_error is signed, against the set's material.json (the model that made the photos may differ from the fitted one); seconds_vs_single (/single) is the fit's time over the single fit of the same set and skip",
+            f.sets
+                .iter()
+                .map(|s| match s.fresnel {
+                    Some(family) => format!("{} ({family:?} Fresnel)", s.path.display()),
+                    None => s.path.display().to_string(),
+                })
+                .collect::<Vec<_>>()
+                .join(" and "),
             f.halvings,
             f.pixel_samples,
             f.max_iters
@@ -398,7 +453,7 @@ fn tables(report: &BenchReport) -> String {
     );
     if !report.jobs.is_empty() {
         out += &format!(
-            "\n{:<7} {:<12} {:>5} {:>9} {:>9} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6}\n",
+            "\n{:<7} {:<12} {:>5} {:>9} {:>9} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6} {:>7}\n",
             "job",
             "model",
             "skip",
@@ -413,11 +468,12 @@ fn tables(report: &BenchReport) -> String {
             "loss",
             "alpha",
             "alpha err",
-            "evals"
+            "evals",
+            "/single"
         );
         for j in &report.jobs {
             out += &format!(
-                "{:<7} {:<12} {:>5} {:>9.4} {:>9.3} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6}\n",
+                "{:<7} {:<12} {:>5} {:>9.4} {:>9.3} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6} {:>7}\n",
                 if j.job == jobs::JobKind::Render { "render" } else { "fit" },
                 j.model.name(),
                 j.skip,
@@ -433,6 +489,7 @@ fn tables(report: &BenchReport) -> String {
                 j.alpha.map_or("-".into(), |a| format!("{a:.4}")),
                 j.alpha_rel_error.map_or("-".into(), |e| format!("{:+.2}%", 100.0 * e)),
                 j.evaluations.map_or("-".into(), |e| e.to_string()),
+                j.seconds_vs_single.map_or("-".into(), |r| format!("{r:.2}x")),
             );
         }
     }
