@@ -4,8 +4,8 @@
 //!
 //! | run | converged values | render job | fit jobs |
 //! | --- | --- | --- | --- |
-//! | full | 100000 samples | 9 photos at 256x256, repeated for 1 s | the 9-photo set at full resolution, every model |
-//! | `--quick` | 4096 samples | 9 photos at 128x128, once | the set halved 4 times (8x8), every model |
+//! | full | 100000 samples | 9 photos at 256x256, repeated for 1 s | each set of `--fit-sets` at full resolution, every model |
+//! | `--quick` | 4096 samples | 9 photos at 128x128, once | each set halved 4 times, every model |
 //!
 //! The fit jobs use the options of `fit` (the same flags, e.g. `--pixel-samples`,
 //! `--max-iters`), and `--seed` seeds everything.
