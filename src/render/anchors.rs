@@ -11,8 +11,8 @@
 //! | quantity | value |
 //! | --- | --- |
 //! | anchors of a `W`-pixel row | columns `0, s, 2s, ...` and `W - 1` (so every pixel lies between two) |
-//! | an anchor's geometry | its sub-sample nearest the pixel centre among those that see the sample |
-//! | a pixel's multiple-bounce value | bilinear in its 4 surrounding anchors; exact (no interpolation) when one of them sees no sample |
+//! | an anchor's geometry | its sub-sample nearest the pixel centre among those that see the sample; for a node off the sample (past its edge), that of the nearest pixel within one stride that sees it |
+//! | a pixel's multiple-bounce value | bilinear in its 4 surrounding anchors; exact (no interpolation) only when a node has no pixel seeing the sample within one stride |
 //! | stride `s` | the largest of [`CANDIDATE_STRIDES`] whose interpolation error, measured on these records with two proxy lobes over [`PROXY_ALPHAS`], stays below the tolerance (RMS over the loss pixels, relative to the RMS radiance) |
 //!
 //! The proxies are the analytic multiple-bounce lobes of Kulla & Conty 2017 (smooth in the
@@ -115,8 +115,11 @@ impl Anchors {
                 let mut corner = |ix: usize, iy: usize| {
                     let slot = &mut slots[photo][iy * xs.len() + ix];
                     if *slot == UNSET {
-                        let pixel = span.first_pixel + ys[iy] * span.width + xs[ix];
-                        *slot = match reference_geometry(records, pixel) {
+                        let (x, y) = (xs[ix], ys[iy]);
+                        let pixel = span.first_pixel + y * span.width + x;
+                        let geometry = reference_geometry(records, pixel)
+                            .or_else(|| nearest_geometry(records, span, (x, y), stride));
+                        *slot = match geometry {
                             Some((wi, wo)) => {
                                 points.push(Anchor { pixel, wi, wo });
                                 (points.len() - 1) as u32
@@ -180,6 +183,29 @@ impl Anchors {
             .next_back()
             .map(|stride| Anchors::new(records, pixels, stride))
     }
+}
+
+/// For a grid node at `(x, y)` of photo `span` that sees no sample: the reference geometry of
+/// the nearest pixel within `stride` in x and y that does (ties: the first in row order), or
+/// `None`. The sample plane continues past the sample's edge and the multiple-bounce term is
+/// smooth in `(wi, wo)`, so the node stands in for the edge; the stride is chosen with these
+/// substitutes in place, so their error is inside the measured tolerance.
+fn nearest_geometry(
+    records: &ShadingRecords,
+    span: &crate::shading::PhotoSpan,
+    (x, y): (usize, usize),
+    stride: usize,
+) -> Option<([f64; 3], [f64; 3])> {
+    let rows = y.saturating_sub(stride)..(y + stride + 1).min(span.height);
+    let columns = x.saturating_sub(stride)..(x + stride + 1).min(span.width);
+    rows.flat_map(|r| columns.clone().map(move |c| (c, r)))
+        .filter_map(|(c, r)| {
+            let distance = c.abs_diff(x).pow(2) + r.abs_diff(y).pow(2);
+            reference_geometry(records, span.first_pixel + r * span.width + c)
+                .map(|geometry| (distance, geometry))
+        })
+        .min_by_key(|&(distance, _)| distance)
+        .map(|(_, geometry)| geometry)
 }
 
 /// The geometry a pixel's multiple-bounce term is evaluated at: its sub-sample nearest the
