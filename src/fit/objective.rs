@@ -16,12 +16,15 @@
 //! variance and pull the fit towards less multiple scattering.
 
 use super::params::ParamSpace;
+use crate::bsdf::albedo_table::AlbedoTable;
+use crate::bsdf::single::SingleBounce;
+use crate::bsdf::Model;
 use crate::bsdf::ScalarBrdf;
 use crate::bsdf::{differentiable, BounceCap};
 use crate::fit::params::Surface;
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::anchors::Anchors;
-use crate::render::batch::{BatchRecords, PixelTangents};
+use crate::render::batch::{BatchRecords, Lobe, PixelTangents};
 use crate::render::plan::{MultiTerm, PlanSummary, RenderPlan, Skips};
 use crate::render::{
     add_to, render_material, render_material_streams, render_planned_streams, SplitRender,
@@ -194,12 +197,20 @@ impl<'a> Objective<'a> {
             .get_or_init(|| BatchRecords::new(self.records, &self.pixels))
     }
 
-    /// Whether a render at `single`'s roughness is the single-bounce and diffuse terms only
-    /// (the model is `single`, or the plan skips the multiple-bounce term there): then the
-    /// batch kernel renders it, and every seed's render is the same.
-    fn single_only<T: Real>(&self, single: &crate::bsdf::single::SingleBounce<T>) -> bool {
-        self.space.model == crate::bsdf::Model::Single
-            || matches!(self.plan().multi_term(single), MultiTerm::Skipped)
+    /// What the batch kernel renders when a render at `single`'s parameters is the single
+    /// lobe (the model is `single`, or the plan drops the multiple-bounce term there) or
+    /// Turquin's scaled single lobe, plus diffuse; `None` for the other models (their exact
+    /// single term still comes from the batch kernel through [`Objective::batch_shared`]).
+    /// Every seed's render is then the same.
+    fn batch_lobe<'s>(&self, single: &'s SingleBounce<f64>) -> Option<Lobe<'s>> {
+        match (self.space.model, self.plan().multi_term(single)) {
+            (Model::Single, _) | (_, MultiTerm::Skipped) => Some(single.into()),
+            (Model::Turquin, MultiTerm::Exact) => Some(Lobe {
+                single,
+                turquin: Some(AlbedoTable::get(single.microfacet.ndf, single.height)),
+            }),
+            _ => None,
+        }
     }
 
     /// The single-bounce and diffuse terms of the loss pixels from the batch kernel (and their
@@ -356,8 +367,8 @@ impl<'a> Objective<'a> {
     /// stochastic model.
     pub fn renders(&self, x: &[f64]) -> Vec<Vec<[f64; 3]>> {
         let surface = self.space.surface(x);
-        if self.single_only(&surface.single) {
-            let render = self.batch().render(&surface.single, surface.diffuse);
+        if let Some(lobe) = self.batch_lobe(&surface.single) {
+            let render = self.batch().render(lobe, surface.diffuse);
             return vec![self.exposed(render, surface.exposure); self.seeds.len()];
         }
         if let Some(split) = self.render_split(x, true) {
@@ -462,7 +473,7 @@ impl<'a> Objective<'a> {
     /// model or the dimension has no dual path. The one match over the dimension picks the
     /// width of the dual numbers.
     pub fn exact_cost_and_gradient(&self, x: &[f64]) -> Option<(f64, Vec<f64>)> {
-        let single_only = self.single_only(&self.space.surface(x).single);
+        let single_only = self.batch_lobe(&self.space.surface(x).single).is_some();
         let (loss, gradient) = match x.len() {
             _ if single_only => Some(self.batch_pass(x)),
             1 => self.dual_pass::<1>(x),
@@ -578,9 +589,10 @@ impl<'a> Objective<'a> {
     /// carries the parameters' derivatives by the coordinates (`ParamSpace::surface`).
     fn batch_pass(&self, x: &[f64]) -> (f64, Vec<f64>) {
         let surface = self.space.surface(x);
-        let (raw, tangents) = self
-            .batch()
-            .render_with_tangents(&surface.single, surface.diffuse);
+        let lobe = self
+            .batch_lobe(&surface.single)
+            .expect("called where the kernel serves");
+        let (raw, tangents) = self.batch().render_with_tangents(lobe, surface.diffuse);
         let render: Vec<[f64; 3]> = raw
             .iter()
             .map(|p| p.map(|v| v * surface.exposure))

@@ -26,9 +26,11 @@
 //! Pixel sums add the sub-samples of a pixel in index order inside one task, so results are
 //! bit-identical for any thread count.
 
+use crate::bsdf::albedo_table::AlbedoTable;
 use crate::bsdf::single::SingleBounce;
 use crate::microfacet::fresnel::{self, Fresnel};
 use crate::microfacet::{beckmann, ggx, Height, NdfKind};
+use crate::scalar::Real;
 use crate::shading::ShadingRecords;
 use num_dual::Dual64;
 use rayon::prelude::*;
@@ -90,6 +92,42 @@ struct Lanes {
     /// Per channel, the record's contribution to `d p_c / d ax` and `d p_c / d ay`.
     by_ax: [Vec<f64>; 3],
     by_ay: [Vec<f64>; 3],
+    /// Per channel, with Turquin's compensation: `F F0 dg/dalpha` (see
+    /// [`BatchRecords::compensate`]).
+    scale_slope: [Vec<f64>; 3],
+}
+
+/// What the batch kernel evaluates: the single-bounce lobe, optionally scaled by Turquin's
+/// compensation `1 + F0 (1 - E(mu_o)) / E(mu_o)` with the white albedo table `turquin`.
+#[derive(Clone, Copy)]
+pub struct Lobe<'a> {
+    pub single: &'a SingleBounce<f64>,
+    pub turquin: Option<&'static AlbedoTable>,
+}
+
+impl<'a> From<&'a SingleBounce<f64>> for Lobe<'a> {
+    fn from(single: &'a SingleBounce<f64>) -> Self {
+        Lobe {
+            single,
+            turquin: None,
+        }
+    }
+}
+
+/// `(F0, d F0 / d first, d F0 / d second)` per channel of `fresnel`'s parameters (see
+/// [`PixelTangents`]): Schlick `F0` itself; a conductor's normal reflectance by `eta` and `k`.
+fn f0_with_tangents(fresnel: &Fresnel<f64>) -> [(f64, f64, f64); 3] {
+    match *fresnel {
+        Fresnel::Schlick { f0 } => f0.0.map(|f| (f, 1.0, 0.0)),
+        Fresnel::Conductor { eta, k } => [0, 1, 2].map(|c| {
+            let one = Dual64::from_re(1.0);
+            let (e, kk) = (Dual64::from_re(eta.0[c]), Dual64::from_re(k.0[c]));
+            let by_eta = fresnel::conductor(one, e.derivative(), kk);
+            let by_k = fresnel::conductor(one, e, kk.derivative());
+            (by_eta.re, by_eta.eps, by_k.eps)
+        }),
+        Fresnel::White | Fresnel::Dielectric { .. } => fresnel.f0().0.map(|f| (f, 0.0, 0.0)),
+    }
 }
 
 /// The derivatives of each pixel's prediction with respect to the kernel's parameters, per
@@ -116,12 +154,12 @@ macro_rules! compiled_for {
         #[target_feature(enable = $features)]
         fn $name(
             &self,
-            single: &SingleBounce<f64>,
+            lobe: &Lobe,
             range: std::ops::Range<usize>,
             tangents: bool,
             lanes: &mut Lanes,
         ) {
-            self.fill_lanes_any(single, range, tangents, lanes)
+            self.fill_lanes_any(lobe, range, tangents, lanes)
         }
     };
 }
@@ -192,24 +230,24 @@ impl BatchRecords {
 
     /// Predicted radiance of every pixel for the single-bounce model `single` plus a
     /// Lambertian layer of albedo `diffuse`: the value of [`super::render_model`] of `single`.
-    pub fn render(&self, single: &SingleBounce<f64>, diffuse: [f64; 3]) -> Vec<[f64; 3]> {
-        self.run(single, diffuse, false).0
+    pub fn render<'a>(&self, lobe: impl Into<Lobe<'a>>, diffuse: [f64; 3]) -> Vec<[f64; 3]> {
+        self.run(&lobe.into(), diffuse, false).0
     }
 
     /// [`BatchRecords::render`] and the derivatives of every pixel with respect to the
     /// parameters of `single` and to `diffuse`, from the same pass.
-    pub fn render_with_tangents(
+    pub fn render_with_tangents<'a>(
         &self,
-        single: &SingleBounce<f64>,
+        lobe: impl Into<Lobe<'a>>,
         diffuse: [f64; 3],
     ) -> (Vec<[f64; 3]>, PixelTangents) {
-        let (values, tangents) = self.run(single, diffuse, true);
+        let (values, tangents) = self.run(&lobe.into(), diffuse, true);
         (values, tangents.expect("asked for"))
     }
 
     fn run(
         &self,
-        single: &SingleBounce<f64>,
+        lobe: &Lobe,
         diffuse: [f64; 3],
         tangents: bool,
     ) -> (Vec<[f64; 3]>, Option<PixelTangents>) {
@@ -225,7 +263,7 @@ impl BatchRecords {
         let chunks = values.par_chunks_mut(TASK_PIXELS).enumerate();
         match &mut t {
             None => chunks.for_each(|(task, out)| {
-                self.task(single, diffuse, task, out, None);
+                self.task(lobe, diffuse, task, out, None);
             }),
             Some(t) => chunks
                 .zip(t.ax.par_chunks_mut(TASK_PIXELS))
@@ -233,7 +271,7 @@ impl BatchRecords {
                 .zip(t.fresnel_a.par_chunks_mut(TASK_PIXELS))
                 .zip(t.fresnel_b.par_chunks_mut(TASK_PIXELS))
                 .for_each(|(((((task, out), ax), ay), fa), fb)| {
-                    self.task(single, diffuse, task, out, Some([ax, ay, fa, fb]));
+                    self.task(lobe, diffuse, task, out, Some([ax, ay, fa, fb]));
                 }),
         }
         (values, t)
@@ -243,7 +281,7 @@ impl BatchRecords {
     /// ay, first and second Fresnel parameter).
     fn task(
         &self,
-        single: &SingleBounce<f64>,
+        lobe: &Lobe,
         diffuse: [f64; 3],
         task: usize,
         out: &mut [[f64; 3]],
@@ -252,7 +290,7 @@ impl BatchRecords {
         let first = task * TASK_PIXELS;
         let range = self.start[first]..self.start[first + out.len()];
         LANES.with_borrow_mut(|lanes| {
-            self.fill_lanes(single, range.clone(), tangents.is_some(), lanes);
+            self.fill_lanes(lobe, range.clone(), tangents.is_some(), lanes);
             self.sum_pixels(lanes, diffuse, first, range, out, tangents);
         });
     }
@@ -292,7 +330,7 @@ impl BatchRecords {
     /// (checked at run time; the loops are compiled once per set).
     fn fill_lanes(
         &self,
-        single: &SingleBounce<f64>,
+        lobe: &Lobe,
         range: std::ops::Range<usize>,
         tangents: bool,
         lanes: &mut Lanes,
@@ -301,16 +339,16 @@ impl BatchRecords {
         {
             if std::arch::is_x86_feature_detected!("avx512f") {
                 // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.fill_lanes_avx512(single, range, tangents, lanes) };
+                return unsafe { self.fill_lanes_avx512(lobe, range, tangents, lanes) };
             }
             if std::arch::is_x86_feature_detected!("avx2")
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 // SAFETY: as above.
-                return unsafe { self.fill_lanes_avx2(single, range, tangents, lanes) };
+                return unsafe { self.fill_lanes_avx2(lobe, range, tangents, lanes) };
             }
         }
-        self.fill_lanes_any(single, range, tangents, lanes)
+        self.fill_lanes_any(lobe, range, tangents, lanes)
     }
 
     compiled_for!(fill_lanes_avx512, "avx512f,avx2,fma");
@@ -320,16 +358,26 @@ impl BatchRecords {
     #[inline(always)]
     fn fill_lanes_any(
         &self,
-        single: &SingleBounce<f64>,
+        lobe: &Lobe,
         range: std::ops::Range<usize>,
         tangents: bool,
         lanes: &mut Lanes,
     ) {
+        let single = lobe.single;
         self.lobes(single, range.clone(), tangents, lanes);
         fresnels(&single.fresnel, &self.cos_d[range.clone()], tangents, lanes);
+        let n = range.len();
+        // d alpha / d ax and d alpha / d ay of Turquin's alpha = sqrt(ax ay) (zero without it).
+        let mut dalpha = [0.0; 2];
+        if let Some(table) = lobe.turquin {
+            self.compensate(single, table, range.clone(), tangents, lanes);
+            let (ax, ay) = (single.microfacet.ax, single.microfacet.ay);
+            let alpha = (ax * ay).sqrt();
+            dalpha = [alpha / (2.0 * ax), alpha / (2.0 * ay)];
+        }
+        let lobe_scaled = lobe.turquin.is_some();
         // Weight by the irradiance: `fresnel` becomes the record's contribution `w F lobe`,
         // the Fresnel derivatives `w lobe dF`, and `by_ax`, `by_ay` get `w F d lobe`.
-        let n = range.len();
         for c in 0..3 {
             let w = &self.weight[c][range.clone()];
             let lobe = &lanes.lobe[..n];
@@ -350,9 +398,56 @@ impl BatchRecords {
                     by_ax[l] = wf * d_ax[l];
                     by_ay[l] = wf * d_ay[l];
                 }
+                if lobe_scaled {
+                    let slope = &lanes.scale_slope[c][..n];
+                    for l in 0..n {
+                        let wl = w[l] * lobe[l] * slope[l];
+                        by_ax[l] += wl * dalpha[0];
+                        by_ay[l] += wl * dalpha[1];
+                    }
+                }
             }
             for (f, (&w, &lobe)) in lanes.fresnel[c][..n].iter_mut().zip(w.iter().zip(lobe)) {
                 *f *= w * lobe;
+            }
+        }
+    }
+
+    /// Turquin 2019 eq. 6-7 ([`crate::bsdf::turquin`]): scale the lanes by
+    /// `S_c = 1 + F0_c g(mu_o, alpha)`, `g = (1 - E) / E` with the white albedo `E` of `table`
+    /// at `mu_o = wo.z` and `alpha = sqrt(ax ay)`, before the weighting step: `F` becomes
+    /// `F S` (so the contribution is `w F S lobe`), `dF` becomes `dF S + F g dF0`, and
+    /// `scale_slope` gets `F F0 dg/dalpha`, the part of `d (F S lobe) / d alpha` the lobe's own
+    /// derivative misses (the weighting step adds it times `w lobe dalpha/da`).
+    fn compensate(
+        &self,
+        single: &SingleBounce<f64>,
+        table: &AlbedoTable,
+        range: std::ops::Range<usize>,
+        tangents: bool,
+        lanes: &mut Lanes,
+    ) {
+        let n = range.len();
+        let mf = &single.microfacet;
+        let alpha = Dual64::from_re((mf.ax * mf.ay).sqrt()).derivative();
+        let f0 = f0_with_tangents(&single.fresnel);
+        let oz = &self.oz[range];
+        for c in 0..3 {
+            lanes.scale_slope[c].resize(n, 0.0);
+        }
+        for (l, &mu) in oz.iter().enumerate() {
+            let e = table.e(mu, alpha).max_c(1e-6);
+            let g = (Dual64::from_re(1.0) - e).max_c(0.0) / e;
+            for (c, &(f0, df0_a, df0_b)) in f0.iter().enumerate() {
+                let f = lanes.fresnel[c][l];
+                let scale = 1.0 + f0 * g.re;
+                if tangents {
+                    let (a, b) = (&mut lanes.d_fresnel_a[c][l], &mut lanes.d_fresnel_b[c][l]);
+                    *a = *a * scale + f * g.re * df0_a;
+                    *b = *b * scale + f * g.re * df0_b;
+                    lanes.scale_slope[c][l] = f * f0 * g.eps;
+                }
+                lanes.fresnel[c][l] = f * scale;
             }
         }
     }

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::bsdf::testing::random_upper;
+use crate::bsdf::turquin::Turquin;
 use crate::microfacet::Microfacet;
 use crate::render::render_model;
 use crate::scalar::{Real, Rgb};
@@ -103,6 +104,31 @@ fn worst_relative(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// The batch lobe of `single`, with Turquin's compensation when `turquin`.
+fn lobe(single: &SingleBounce<f64>, turquin: bool) -> Lobe<'_> {
+    Lobe {
+        single,
+        turquin: turquin.then(|| AlbedoTable::get(single.microfacet.ndf, single.height)),
+    }
+}
+
+#[test]
+fn turquin_batch_render_equals_its_scalar_render() {
+    let records = random_records(2000, 9);
+    let pixels: Vec<usize> = (0..records.pixel_count()).collect();
+    let batch = BatchRecords::new(&records, &pixels);
+    let diffuse = [0.1, 0.2, 0.3];
+    for single in surfaces() {
+        let reference = render_model(&Turquin::new(single), diffuse, &records, &pixels, 0);
+        let fast = batch.render(lobe(&single, true), diffuse);
+        let worst = worst_relative(&reference, &fast);
+        assert!(
+            worst < 1e-12,
+            "{single:?}: worst relative difference {worst:e}"
+        );
+    }
+}
+
 #[test]
 fn batch_render_equals_the_scalar_render() {
     let records = random_records(3000, 7);
@@ -125,6 +151,7 @@ fn batch_render_equals_the_scalar_render() {
 /// The scalar kernel in dual numbers with the derivative seeded on one parameter.
 fn dual_render(
     single: &SingleBounce<f64>,
+    turquin: bool,
     records: &ShadingRecords,
     pixels: &[usize],
     seed: impl Fn(&mut SingleBounce<Dual64>),
@@ -150,19 +177,31 @@ fn dual_render(
         height: single.height,
     };
     seed(&mut dual);
-    render_model(&dual, [Dual64::c(0.0); 3], records, pixels, 0)
-        .iter()
-        .map(|p| p.map(|v| v.eps))
-        .collect()
+    let zero = [Dual64::c(0.0); 3];
+    let render = if turquin {
+        render_model(&Turquin::new(dual), zero, records, pixels, 0)
+    } else {
+        render_model(&dual, zero, records, pixels, 0)
+    };
+    render.iter().map(|p| p.map(|v| v.eps)).collect()
 }
 
 #[test]
 fn tangents_equal_the_dual_number_derivatives_of_the_scalar_kernel() {
+    check_tangents(false);
+}
+
+#[test]
+fn turquin_tangents_equal_the_dual_number_derivatives_of_its_scalar_kernel() {
+    check_tangents(true);
+}
+
+fn check_tangents(turquin: bool) {
     let records = random_records(1500, 11);
     let pixels: Vec<usize> = (0..records.pixel_count()).collect();
     let batch = BatchRecords::new(&records, &pixels);
     for single in surfaces() {
-        let (_, t) = batch.render_with_tangents(&single, [0.0; 3]);
+        let (_, t) = batch.render_with_tangents(lobe(&single, turquin), [0.0; 3]);
         let check = |name: &str, fast: &[[f64; 3]], exact: Vec<[f64; 3]>| {
             let worst = worst_relative(&exact, fast);
             assert!(worst < 1e-9, "{single:?} d/d{name}: worst {worst:e}");
@@ -170,14 +209,14 @@ fn tangents_equal_the_dual_number_derivatives_of_the_scalar_kernel() {
         check(
             "ax",
             &t.ax,
-            dual_render(&single, &records, &pixels, |s| {
+            dual_render(&single, turquin, &records, &pixels, |s| {
                 s.microfacet.ax = s.microfacet.ax.derivative()
             }),
         );
         check(
             "ay",
             &t.ay,
-            dual_render(&single, &records, &pixels, |s| {
+            dual_render(&single, turquin, &records, &pixels, |s| {
                 s.microfacet.ay = s.microfacet.ay.derivative()
             }),
         );
@@ -187,7 +226,7 @@ fn tangents_equal_the_dual_number_derivatives_of_the_scalar_kernel() {
             Fresnel::Schlick { .. } => check(
                 "F0",
                 &t.fresnel_a,
-                dual_render(&single, &records, &pixels, |s| {
+                dual_render(&single, turquin, &records, &pixels, |s| {
                     if let Fresnel::Schlick { f0 } = &mut s.fresnel {
                         *f0 = f0.map(|v| v.derivative());
                     }
@@ -197,7 +236,7 @@ fn tangents_equal_the_dual_number_derivatives_of_the_scalar_kernel() {
                 check(
                     "eta",
                     &t.fresnel_a,
-                    dual_render(&single, &records, &pixels, |s| {
+                    dual_render(&single, turquin, &records, &pixels, |s| {
                         if let Fresnel::Conductor { eta, .. } = &mut s.fresnel {
                             *eta = eta.map(|v| v.derivative());
                         }
@@ -206,7 +245,7 @@ fn tangents_equal_the_dual_number_derivatives_of_the_scalar_kernel() {
                 check(
                     "k",
                     &t.fresnel_b,
-                    dual_render(&single, &records, &pixels, |s| {
+                    dual_render(&single, turquin, &records, &pixels, |s| {
                         if let Fresnel::Conductor { k, .. } = &mut s.fresnel {
                             *k = k.map(|v| v.derivative());
                         }
