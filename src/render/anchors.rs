@@ -52,7 +52,8 @@ pub struct Anchors {
     pub stride: usize,
     pub points: Vec<Anchor>,
     /// Per pixel of the list: its anchors and weights, or `None` when some surrounding anchor
-    /// sees no sample (the pixel is then evaluated exactly).
+    /// has no geometry: neither it nor any pixel within one stride of it sees the sample (the
+    /// pixel is then evaluated exactly).
     pub corners: Vec<Option<Corners>>,
 }
 
@@ -82,7 +83,7 @@ impl Anchors {
     pub fn new(records: &ShadingRecords, pixels: &[usize], stride: usize) -> Anchors {
         let mut points = Vec::new();
         // Per photo: anchor index of each grid node, assigned on first use (u32::MAX: not yet,
-        // u32::MAX - 1: the node sees no sample).
+        // u32::MAX - 1: neither the node nor a pixel within one stride sees the sample).
         const UNSET: u32 = u32::MAX;
         const BLIND: u32 = u32::MAX - 1;
         let grids: Vec<(Vec<usize>, Vec<usize>)> = records
@@ -148,7 +149,8 @@ impl Anchors {
         }
     }
 
-    /// Pixels of the list evaluated exactly because an anchor around them sees no sample.
+    /// Pixels of the list evaluated exactly because an anchor around them has no geometry
+    /// (no pixel within one stride of it sees the sample).
     pub fn exact_pixels(&self) -> usize {
         self.corners.iter().filter(|c| c.is_none()).count()
     }

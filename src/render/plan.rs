@@ -135,7 +135,8 @@ pub struct PlanSummary {
     pub multi_stride: usize,
     /// Anchors evaluated per render.
     pub anchors: usize,
-    /// Pixels evaluated exactly because an anchor around them sees no sample.
+    /// Pixels evaluated exactly because an anchor around them has no geometry (no pixel within
+    /// one stride of it sees the sample).
     pub exact_pixels: usize,
     /// BRDF evaluations saved per render by repeated geometry.
     pub repeated_saved: usize,
