@@ -39,6 +39,25 @@ fn ideal_manifest(dir: &Path) -> std::path::PathBuf {
     path
 }
 
+/// `bouncefit capture PHOTOS... --board BOARD -o OUT EXTRA...`.
+fn capture_args<'a>(
+    board: &'a Path,
+    out: &'a Path,
+    photos: &[&'a str],
+    extra: &[&'a str],
+) -> Vec<&'a str> {
+    let mut args = vec!["capture"];
+    args.extend_from_slice(photos);
+    args.extend([
+        "--board",
+        board.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    args.extend_from_slice(extra);
+    args
+}
+
 #[test]
 fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
     let dir = tempfile::tempdir().unwrap();
@@ -79,17 +98,13 @@ fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
                 .to_owned()
         })
         .collect();
-    let mut args = vec![
-        "capture",
-        "--board",
-        board_toml.to_str().unwrap(),
-        "-o",
-        set.to_str().unwrap(),
-        "--flash-intensity",
-        &intensity,
-    ];
-    args.extend(jpegs.iter().map(String::as_str));
-    run_ok(&args);
+    let photos: Vec<&str> = jpegs.iter().map(String::as_str).collect();
+    run_ok(&capture_args(
+        &board_toml,
+        &set,
+        &photos,
+        &["--flash-intensity", &intensity],
+    ));
 
     // Cameras: focal length (truth: fov 50 degrees over 600 px) and centres within 1%.
     let report = read_json(&set.join("capture-report.json"));
@@ -203,18 +218,12 @@ fn photos_without_tags_or_flash_are_left_out_by_name_and_too_few_refuse() {
             .to_owned()
     };
     let (a, b, c) = (jpeg(0), jpeg(1), jpeg(2));
-    let stderr = run_bad(&[
-        "capture",
-        &a,
-        &b,
-        &c,
-        "--board",
-        board_toml.to_str().unwrap(),
-        "-o",
-        set.to_str().unwrap(),
-        "--focal-px",
-        "321.7",
-    ]);
+    let stderr = run_bad(&capture_args(
+        &board_toml,
+        &set,
+        &[&a, &b, &c],
+        &["--focal-px", "321.7"],
+    ));
     assert!(
         stderr.contains("01: left out: the flash explains"),
         "{stderr}"
@@ -240,23 +249,14 @@ fn photos_without_tags_or_flash_are_left_out_by_name_and_too_few_refuse() {
         ),
     )
     .unwrap();
-    let stderr = run_bad(&[
-        "capture",
-        &a,
-        "--board",
-        broken.to_str().unwrap(),
-        "-o",
-        set.to_str().unwrap(),
-    ]);
+    let stderr = run_bad(&capture_args(&broken, &set, &[&a], &[]));
     assert!(stderr.contains("broken.toml: tag_size"), "{stderr}");
-    let stderr = run_bad(&[
-        "capture",
-        "/nonexistent/x.jpg",
-        "--board",
-        board_toml.to_str().unwrap(),
-        "-o",
-        set.to_str().unwrap(),
-    ]);
+    let stderr = run_bad(&capture_args(
+        &board_toml,
+        &set,
+        &["/nonexistent/x.jpg"],
+        &[],
+    ));
     assert!(stderr.contains("/nonexistent/x.jpg"), "{stderr}");
 }
 
@@ -341,15 +341,8 @@ fn exif_focal_length_and_orientation_are_read() {
         })
         .collect();
     let set = dir.path().join("set");
-    let mut args = vec![
-        "capture",
-        "--board",
-        board_toml.to_str().unwrap(),
-        "-o",
-        set.to_str().unwrap(),
-    ];
-    args.extend(tagged.iter().map(String::as_str));
-    run_ok(&args);
+    let photos: Vec<&str> = tagged.iter().map(String::as_str).collect();
+    run_ok(&capture_args(&board_toml, &set, &photos, &[]));
     let report = read_json(&set.join("capture-report.json"));
     assert_eq!(report["focal_source"], "exif");
     assert!((report["focal_px"].as_f64().unwrap() / focal - 1.0).abs() < 1e-9);
