@@ -21,6 +21,7 @@ pub mod error;
 pub mod export;
 pub mod fit;
 pub mod loss;
+pub mod maps;
 pub mod material;
 pub mod microfacet;
 pub mod progress;

@@ -170,6 +170,27 @@ fn required<T: serde::de::DeserializeOwned>(
         .ok_or_else(|| Error::invalid(path, key, format!("missing; expected {expected}")))
 }
 
+/// The top-level JSON object of the material or fit file `path`; syntax errors name the line
+/// and column.
+pub fn read_json_object(path: &Path) -> Result<serde_json::Map<String, serde_json::Value>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+        Error::invalid(
+            path,
+            format!("line {} column {}", e.line(), e.column()),
+            format!("{}; expected a JSON material file", json_message(&e)),
+        )
+    })?;
+    match value {
+        serde_json::Value::Object(fields) => Ok(fields),
+        _ => Err(Error::invalid(
+            path,
+            "top level",
+            "expected a JSON object {\"model\": ..., \"alpha\": ..., \"fresnel\": ...}",
+        )),
+    }
+}
+
 /// A homogeneous material: a specular microfacet model plus an optional Lambertian layer,
 /// `f = f_model + diffuse / pi`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -201,21 +222,14 @@ impl Material {
     /// Each field is read on its own so that a wrong type names its key; JSON syntax errors
     /// name the line and column.
     pub fn load_with_warnings(path: &Path) -> Result<(Self, Vec<String>)> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
-            Error::invalid(
-                path,
-                format!("line {} column {}", e.line(), e.column()),
-                format!("{}; expected a JSON material file", json_message(&e)),
-            )
-        })?;
-        let serde_json::Value::Object(mut fields) = value else {
-            return Err(Error::invalid(
-                path,
-                "top level",
-                "expected a JSON object {\"model\": ..., \"alpha\": ..., \"fresnel\": ...}",
-            ));
-        };
+        Material::from_fields(path, read_json_object(path)?)
+    }
+
+    /// [`Material::load_with_warnings`] from the already parsed top-level object of `path`.
+    pub fn from_fields(
+        path: &Path,
+        mut fields: serde_json::Map<String, serde_json::Value>,
+    ) -> Result<(Self, Vec<String>)> {
         let warnings = if fields.contains_key(FIT_FILE_MARKER) {
             Vec::new()
         } else {

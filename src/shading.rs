@@ -83,6 +83,12 @@ pub struct ShadingRecords {
     /// Per sub-sample: unit direction toward the camera, local frame.
     /// `+z` for sub-samples that miss the sample.
     pub wo: Vec<[f64; 3]>,
+    /// Per sub-sample: texture coordinates `(u, v)` in [0, 1]^2 of the point of the sample it
+    /// sees, `u` along +x from the sample's left edge and `v` along -y from its top edge (as
+    /// the rows of a rectified photo), which pick the texel of a maps material
+    /// ([`crate::maps`]); `(0, 0)` for sub-samples that miss the sample. Empty for records made
+    /// without a capture (tests, direction-pair lists), which only uniform materials render.
+    pub uv: Vec<[f64; 2]>,
     /// Per sub-sample: the factor that turns `f` (1/sr) into radiance, exposure included:
     /// `I * wi.z / d^2 * exposure` for a point light. Zero where the sub-sample misses the
     /// sample or the light is below the horizon.
@@ -96,8 +102,11 @@ pub struct ShadingRecords {
     pub excluded: ExclusionCounts,
 }
 
+/// The geometry of one sub-sample: `(wi, wo, irradiance, uv)` as in [`ShadingRecords`].
+type SubSample = ([f64; 3], [f64; 3], [f64; 3], [f64; 2]);
+
 /// Geometry of a sub-sample that misses the sample: valid directions, no light.
-const MISS: ([f64; 3], [f64; 3], [f64; 3]) = ([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0; 3]);
+const MISS: SubSample = ([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0; 3], [0.0; 2]);
 
 impl ShadingRecords {
     /// Number of pixels over all photos.
@@ -195,6 +204,7 @@ impl ShadingRecords {
                 .try_reserve_exact(sub_samples)
                 .map_err(too_large)?;
         }
+        self.uv.try_reserve_exact(sub_samples).map_err(too_large)?;
         self.target.try_reserve_exact(pixels).map_err(too_large)?;
         self.weight.try_reserve_exact(pixels).map_err(too_large)
     }
@@ -209,6 +219,7 @@ impl ShadingRecords {
         self.wi.resize(sub_samples, MISS.0);
         self.wo.resize(sub_samples, MISS.1);
         self.irradiance.resize(sub_samples, MISS.2);
+        self.uv.resize(sub_samples, MISS.3);
         self.target.resize(pixels.end, [0.0; 3]);
         self.weight.resize(pixels.end, 0.0);
         let row = span.width * spp;
@@ -216,19 +227,20 @@ impl ShadingRecords {
             .par_chunks_mut(row)
             .zip(self.wo[first..].par_chunks_mut(row))
             .zip(self.irradiance[first..].par_chunks_mut(row))
+            .zip(self.uv[first..].par_chunks_mut(row))
             .zip(self.weight[pixels.start..].par_chunks_mut(span.width))
             .enumerate()
-            .for_each(|(r, (((wi, wo), irradiance), weight))| {
+            .for_each(|(r, ((((wi, wo), irradiance), uv), weight))| {
                 for (c, pixel_weight) in weight.iter_mut().enumerate() {
                     let mut seen = false;
                     for j in 0..spp {
-                        let position = [
+                        let pixel = [
                             c as f64 + ((j % grid) as f64 + 0.5) / grid as f64,
                             r as f64 + ((j / grid) as f64 + 0.5) / grid as f64,
                         ];
-                        if let Some((i, o, e)) = sub_sample(capture, photo, position) {
+                        if let Some((i, o, e, x)) = sub_sample(capture, photo, pixel) {
                             let s = c * spp + j;
-                            (wi[s], wo[s], irradiance[s]) = (i, o, e);
+                            (wi[s], wo[s], irradiance[s], uv[s]) = (i, o, e, x);
                             seen = true;
                         }
                     }
@@ -289,13 +301,9 @@ impl ShadingRecords {
     }
 }
 
-/// `(wi, wo, irradiance * exposure)` of the sub-sample at pixel position `pixel`, or `None`
-/// when it does not see the sample.
-fn sub_sample(
-    capture: &Capture,
-    photo: &Photo,
-    pixel: [f64; 2],
-) -> Option<([f64; 3], [f64; 3], [f64; 3])> {
+/// `(wi, wo, irradiance * exposure, uv)` of the sub-sample at pixel position `pixel`, or
+/// `None` when it does not see the sample.
+fn sub_sample(capture: &Capture, photo: &Photo, pixel: [f64; 2]) -> Option<SubSample> {
     let x = photo
         .camera
         .surface_point(&capture.sample, pixel)
@@ -307,6 +315,10 @@ fn sub_sample(
         incident.wi.to_array(),
         wo.to_array(),
         incident.irradiance.map(|e| e * photo.exposure),
+        [
+            x.x / capture.sample.width + 0.5,
+            0.5 - x.y / capture.sample.height,
+        ],
     ))
 }
 
@@ -527,7 +539,7 @@ mod tests {
         let expected = (DVec3::new(0.0, 0.0, h) - DVec3::new(-4.75, 4.75, 0.0)).normalize();
         assert!(close(r.wo[10 * 40 + 10], expected.to_array(), 1e-12));
         // Misses are harmless: +z directions and no light.
-        assert_eq!((r.wi[0], r.wo[0], r.irradiance[0]), MISS);
+        assert_eq!((r.wi[0], r.wo[0], r.irradiance[0], r.uv[0]), MISS);
     }
 
     #[test]

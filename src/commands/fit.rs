@@ -47,6 +47,8 @@ pub struct FitArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub mcmc: McmcArgs,
+    #[command(flatten)]
+    pub map_options: super::fit_maps::MapsArgs,
 }
 
 /// How to fit each model: the options `fit` and `compare` share.
@@ -542,7 +544,26 @@ impl<'a> FitFile<'a> {
     }
 }
 
+/// Prediction minus photo at every loss pixel, 0 elsewhere: what the residual images show.
+pub fn residuals(predicted: &[[f64; 3]], records: &ShadingRecords) -> Vec<[f64; 3]> {
+    predicted
+        .iter()
+        .zip(&records.target)
+        .zip(&records.weight)
+        .map(|((p, t), w)| {
+            if *w > 0.0 {
+                [0, 1, 2].map(|c| p[c] - t[c])
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect()
+}
+
 pub fn run_fit(args: &FitArgs) -> Result<()> {
+    if args.map_options.maps {
+        return super::fit_maps::run_maps_fit(args);
+    }
     let capture = args.options.real.open(&args.capture)?;
     let output = args
         .output
@@ -593,18 +614,7 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         &args.options,
     )
     .with_region(region);
-    let residual: Vec<[f64; 3]> = predicted
-        .iter()
-        .zip(&records.target)
-        .zip(&records.weight)
-        .map(|((p, t), w)| {
-            if *w > 0.0 {
-                [0, 1, 2].map(|c| p[c] - t[c])
-            } else {
-                [0.0; 3]
-            }
-        })
-        .collect();
+    let residual = residuals(&predicted, &records);
     let exposure = display_exposure(&records.target);
     write_photo_images(&residual_folder.path(""), &records, &residual, exposure, "")?;
     file.write(&output)?;

@@ -148,7 +148,7 @@ fn records_of(image: &LinearImage) -> ShadingRecords {
         irradiance: vec![[0.0; 3]; n],
         target: Values::of(image).rgb,
         weight: vec![1.0; n],
-        excluded: Default::default(),
+        ..ShadingRecords::default()
     }
 }
 

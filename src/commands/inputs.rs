@@ -2,7 +2,8 @@
 //! (unknown keys and the like, which are not errors) printed on stderr as `warning: ...`.
 
 use crate::capture::Capture;
-use crate::error::Result;
+use crate::error::{Error, Result};
+use crate::maps::AnyMaterial;
 use crate::material::Material;
 use std::path::Path;
 
@@ -13,9 +14,24 @@ pub fn open_capture(path: &Path) -> Result<Capture> {
     Ok(capture)
 }
 
-/// [`Material::load_with_warnings`], printing the warnings.
+/// A uniform material file, printing its warnings; a maps material is refused (the command
+/// has no per-texel path).
 pub fn load_material(path: &Path) -> Result<Material> {
-    let (material, warnings) = Material::load_with_warnings(path)?;
+    match load_any_material(path)? {
+        AnyMaterial::Uniform(material) => Ok(material),
+        AnyMaterial::Maps(_) => Err(Error::invalid(
+            path,
+            "maps",
+            "this command takes a uniform material; maps materials are read by synth, render \
+             and export",
+        )),
+    }
+}
+
+/// A uniform or maps material file ([`AnyMaterial::load_with_warnings`]), printing the
+/// warnings.
+pub fn load_any_material(path: &Path) -> Result<AnyMaterial> {
+    let (material, warnings) = AnyMaterial::load_with_warnings(path)?;
     print_warnings(&warnings);
     Ok(material)
 }

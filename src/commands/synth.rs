@@ -2,13 +2,15 @@
 //! (re-render a photo set with a material or fit, a fit's `exposure` applied).
 
 use super::images::{display_exposure, write_photo_images};
-use super::inputs::{load_material, open_capture};
+use super::inputs::{load_any_material, open_capture};
 use super::output::StagedFolder;
 use crate::albedo::rng_stream;
 use crate::capture::image_io::ColorEncoding;
+use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::exposure::exposed_records;
-use crate::render::render_all;
+use crate::maps::render::render_any;
+use crate::maps::AnyMaterial;
 use crate::shading::ShadingRecords;
 use rand_distr::{Distribution, StandardNormal};
 use std::path::PathBuf;
@@ -87,11 +89,12 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
             format!("must be a finite number >= 0, got {}", args.noise),
         ));
     }
-    let material = load_material(&args.material)?;
+    let material = load_any_material(&args.material)?;
     let capture = open_capture(&args.capture)?;
+    check_maps_fit(&material, &args.material, &capture)?;
     let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
     let folder = StagedFolder::new(&args.output, args.force)?;
-    let mut pixels = render_all(&material, &records, args.seed);
+    let mut pixels = render_any(&material, &records, args.seed)?;
     if let Some(board) = &args.board {
         let board = crate::board::Board::load(board)?;
         let paper = crate::board::paper::paper_radiance(&board, &capture, args.pixel_samples);
@@ -147,10 +150,15 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
         photo.saturated_mask = None;
     }
     synthetic.save_manifest(&folder.path("capture.toml"))?;
-    crate::capture::atomic_file::write_atomically(&folder.path("material.json"), |w| {
-        serde_json::to_writer_pretty(&mut *w, &material)
-            .map_err(|e| Error::io(args.output.join("material.json"), e))
-    })?;
+    match &material {
+        AnyMaterial::Uniform(material) => {
+            crate::capture::atomic_file::write_atomically(&folder.path("material.json"), |w| {
+                serde_json::to_writer_pretty(&mut *w, material)
+                    .map_err(|e| Error::io(args.output.join("material.json"), e))
+            })?
+        }
+        AnyMaterial::Maps(maps) => maps.save(&folder.path("material.json"), Default::default())?,
+    }
     folder.commit()?;
     eprintln!(
         "wrote {} photos of {}x{} to {}",
@@ -203,16 +211,25 @@ fn fitted_exposure(path: &std::path::Path) -> f64 {
         .unwrap_or(1.0)
 }
 
+/// Refuses maps whose texels are not square on the capture's sample.
+fn check_maps_fit(material: &AnyMaterial, path: &std::path::Path, capture: &Capture) -> Result<()> {
+    match material {
+        AnyMaterial::Maps(maps) => maps.check_sample(path, &capture.sample),
+        AnyMaterial::Uniform(_) => Ok(()),
+    }
+}
+
 pub fn run_render(args: &RenderArgs) -> Result<()> {
-    let material = load_material(&args.material)?;
+    let material = load_any_material(&args.material)?;
     let mut capture = open_capture(&args.capture)?;
     if let Some(depth) = args.depth {
         capture.depth = depth;
     }
+    check_maps_fit(&material, &args.material, &capture)?;
     let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
     let records = exposed_records(&records, fitted_exposure(&args.material));
     let folder = StagedFolder::new(&args.output, args.force)?;
-    let pixels = render_all(&material, &records, args.seed);
+    let pixels = render_any(&material, &records, args.seed)?;
     write_photo_images(
         &folder.path(""),
         &records,

@@ -305,7 +305,7 @@ fn shared_values<T: Real>(
 /// The pixel loop every render shares: pixel `k` of `pixels` is the mean over its sub-samples
 /// `s` (global indices) of `(f(k, s, rng) + diffuse / pi) * irradiance[s]`, where `rng` is the
 /// pixel's own stream; sub-samples without irradiance are not evaluated.
-fn accumulate<T: Real>(
+pub(crate) fn accumulate<T: Real>(
     records: &ShadingRecords,
     pixels: &[usize],
     diffuse: [T; 3],

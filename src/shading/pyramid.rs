@@ -63,6 +63,9 @@ impl ShadingRecords {
                             out.wi.push(self.wi[s]);
                             out.wo.push(self.wo[s]);
                             out.irradiance.push(self.irradiance[s]);
+                            if let Some(&uv) = self.uv.get(s) {
+                                out.uv.push(uv);
+                            }
                         }
                     }
                 }
@@ -94,7 +97,7 @@ mod tests {
             irradiance: vec![[1.0; 3]; n * spp],
             target: (0..n).map(|p| [p as f64; 3]).collect(),
             weight: vec![1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0],
-            excluded: Default::default(),
+            ..ShadingRecords::default()
         }
     }
 

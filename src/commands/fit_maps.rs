@@ -1,0 +1,257 @@
+//! `bouncefit fit DIR --maps`: fit material maps ([`crate::maps::fit`]) and write a maps fit
+//! file (`FIT.json` naming `FIT.maps/diffuse.png`, `specular.png`, `roughness.exr`,
+//! `normal.png`) plus residual images, every output staged and committed at the end. Pixels are
+//! evaluated at their centre (one sub-sample), so each sees exactly one texel.
+
+use super::fit::{load_records, residuals, FitArgs, FitOptionArgs};
+use super::images::{display_exposure, write_photo_images};
+use super::output::{check_overwrite, StagedFolder};
+use crate::error::{Error, Result};
+use crate::fit::exposure::exposed_records;
+use crate::fit::fit_model;
+use crate::maps::fit::{fit_maps, relative_error, MapsFit, MapsFitOptions};
+use crate::maps::render::render_maps;
+use crate::maps::{MaterialMaps, TexelGrid};
+use crate::shading::{PhotoSpan, ShadingRecords};
+use serde_json::json;
+use std::path::Path;
+
+/// The options of `fit --maps`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MapsArgs {
+    /// Fit material maps (per-texel diffuse albedo, specular F0, roughness; see --normals)
+    /// instead of one uniform material.
+    #[arg(long)]
+    pub maps: bool,
+    /// Texel grid WIDTHxHEIGHT over the sample (default: the first photo's width, the height
+    /// in the sample's proportions).
+    #[arg(long, value_parser = parse_texels, requires = "maps")]
+    pub texels: Option<TexelGrid>,
+    /// Fit a shading normal per texel too.
+    #[arg(long, requires = "maps")]
+    pub normals: bool,
+    /// Most basis materials tried; the number is chosen by the error of a validation photo.
+    #[arg(long, default_value_t = 4, requires = "maps",
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=12))]
+    pub bases: usize,
+    /// Leave photo N (0-based, capture order) out of the fit and report the relative error of
+    /// its prediction in the fit file (`holdout`).
+    #[arg(long, requires = "maps")]
+    pub holdout_photo: Option<usize>,
+}
+
+fn parse_texels(text: &str) -> std::result::Result<TexelGrid, String> {
+    let parts: Vec<&str> = text.split(['x', 'X']).collect();
+    let [w, h] = parts.as_slice() else {
+        return Err(format!("`{text}`: expected WIDTHxHEIGHT, e.g. 256x256"));
+    };
+    let number = |s: &str| {
+        s.trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|&n| (1..=8192).contains(&n))
+            .ok_or_else(|| format!("`{text}`: sizes must be whole numbers from 1 to 8192"))
+    };
+    Ok(TexelGrid {
+        width: number(w)?,
+        height: number(h)?,
+    })
+}
+
+pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
+    // One sub-sample per pixel, its centre: each pixel then sees exactly one texel.
+    let options = &FitOptionArgs {
+        pixel_samples: 1,
+        ..args.options.clone()
+    };
+    let [model] = args.models.as_slice() else {
+        return Err(Error::argument(
+            "--models",
+            "a maps fit takes one model (compare maps of several with `compare --maps`)",
+        ));
+    };
+    let capture = options.real.open(&args.capture)?;
+    let output = args
+        .output
+        .clone()
+        .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
+    check_overwrite(&output, args.force)?;
+    let maps_folder = StagedFolder::new(&MaterialMaps::folder_beside(&output), args.force)?;
+    let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
+    let grid = args.map_options.texels.unwrap_or_else(|| {
+        let width = capture.photos[0].camera.resolution()[0];
+        let height = (width as f64 * capture.sample.height / capture.sample.width).round();
+        TexelGrid {
+            width,
+            height: (height as usize).max(1),
+        }
+    });
+    let (records, _) = load_records(&args.capture, &capture, options)?;
+    let photos = records.photos.len();
+    if let Some(h) = args.map_options.holdout_photo.filter(|&h| h >= photos) {
+        return Err(Error::argument(
+            "--holdout-photo",
+            format!(
+                "photo {h} does not exist; the set has photos 0 to {}",
+                photos - 1
+            ),
+        ));
+    }
+    if photos < 2 + usize::from(args.map_options.holdout_photo.is_some()) {
+        return Err(Error::invalid(
+            &args.capture,
+            "photos",
+            "a maps fit needs at least two photos to fit (and one more to hold out)",
+        ));
+    }
+    // A fitted exposure comes from the uniform fit of the same photos (with the known Fresnel):
+    // the maps' per-texel albedo would absorb it otherwise.
+    let exposure = if options.real.fit_exposure {
+        options
+            .space(*model)
+            .check()
+            .map_err(|m| Error::argument("--fit-exposure", m))?;
+        let uniform = fit_model(&records, &options.fit_options(*model, !args.quiet))?;
+        uniform.exposure.as_ref().map_or(1.0, |e| e.value)
+    } else {
+        1.0
+    };
+    let records = exposed_records(&records, exposure).into_owned();
+    let holdout = args.map_options.holdout_photo;
+    let training = match holdout {
+        Some(h) => records.restricted_to_photos(|i| i != h),
+        None => records.clone(),
+    };
+    let validation_photo = (0..photos).rev().find(|&i| Some(i) != holdout);
+    let fit = fit_maps(
+        &training,
+        &MapsFitOptions {
+            model: *model,
+            ndf: options.ndf,
+            height: options.height,
+            known_fresnel: options.real.fresnel_known,
+            grid,
+            normals: args.map_options.normals,
+            max_bases: args.map_options.bases,
+            validation_photo,
+            progress: !args.quiet,
+        },
+    )?;
+    let all: Vec<usize> = (0..records.pixel_count()).collect();
+    let predicted = render_maps(&fit.maps, &records, &all, options.seed)?;
+    let holdout_report = holdout.map(|h| {
+        let pixels: Vec<usize> = records.photos[h]
+            .pixels()
+            .filter(|&p| records.weight[p] > 0.0)
+            .collect();
+        let values: Vec<[f64; 3]> = pixels.iter().map(|&p| predicted[p]).collect();
+        json!({"photo": h, "stem": records.photos[h].stem,
+               "relative_error": relative_error(&values, &records, &pixels),
+               "mean_photo_error": mean_photo_error(&records, h)})
+    });
+    if !args.quiet {
+        summarise(&fit, holdout_report.as_ref());
+    }
+    let residual = residuals(&predicted, &records);
+    let display = display_exposure(&records.target);
+    write_photo_images(&residual_folder.path(""), &records, &residual, display, "")?;
+    let folder_name = MaterialMaps::folder_beside(&output);
+    let prefix = folder_name
+        .file_name()
+        .unwrap_or_default()
+        .to_string_lossy();
+    let maps_entry = fit.maps.write_images(&maps_folder.path(""), &prefix)?;
+    let mut extra = serde_json::Map::new();
+    extra.insert(
+        "maps_fit".into(),
+        serde_json::to_value(&fit).expect("serialisable"),
+    );
+    extra.insert("texels".into(), json!([grid.width, grid.height]));
+    if let Some(report) = holdout_report {
+        extra.insert("holdout".into(), report);
+    }
+    if options.real.fit_exposure {
+        extra.insert("exposure".into(), json!({"value": exposure}));
+    }
+    extra.insert("capture".into(), json!(args.capture.display().to_string()));
+    extra.insert("capture_name".into(), json!(capture.name));
+    extra.insert("pixel_samples".into(), json!(options.pixel_samples));
+    extra.insert(
+        "excluded".into(),
+        serde_json::to_value(records.excluded).expect("serialisable"),
+    );
+    extra.insert("seed".into(), json!(options.seed));
+    extra.insert("version".into(), json!(env!("CARGO_PKG_VERSION")));
+    maps_folder.commit()?;
+    residual_folder.commit()?;
+    fit.maps.save_json(&output, maps_entry, extra)?;
+    println!("{}", output.display());
+    Ok(())
+}
+
+/// The naive baseline of a held-out photo: the relative error of predicting it by the mean of
+/// the other photos at the same pixel (rectified photos of one size; `null` otherwise), over
+/// the pixels usable in all of them.
+fn mean_photo_error(records: &ShadingRecords, held_out: usize) -> Option<f64> {
+    let span = &records.photos[held_out];
+    let others: Vec<&PhotoSpan> = (0..records.photos.len())
+        .filter(|&i| i != held_out)
+        .map(|i| &records.photos[i])
+        .collect();
+    if others
+        .iter()
+        .any(|o| (o.width, o.height) != (span.width, span.height))
+    {
+        return None;
+    }
+    let (mut error, mut signal) = (0.0, 0.0);
+    for i in 0..span.width * span.height {
+        let p = span.first_pixel + i;
+        if records.weight[p] == 0.0
+            || others
+                .iter()
+                .any(|o| records.weight[o.first_pixel + i] == 0.0)
+        {
+            continue;
+        }
+        for c in 0..3 {
+            let mean = others
+                .iter()
+                .map(|o| records.target[o.first_pixel + i][c])
+                .sum::<f64>()
+                / others.len() as f64;
+            error += (mean - records.target[p][c]).powi(2);
+            signal += records.target[p][c].powi(2);
+        }
+    }
+    (signal > 0.0).then(|| (error / signal).sqrt())
+}
+
+/// One line per stage for stderr.
+fn summarise(fit: &MapsFit, holdout: Option<&serde_json::Value>) {
+    for trial in &fit.basis_trials {
+        eprintln!(
+            "{} bases: validation photo relative error {:.4}",
+            trial.bases, trial.validation_error
+        );
+    }
+    let bases: Vec<String> = fit
+        .bases
+        .iter()
+        .map(|b| format!("alpha {:.3} ({:.0}%)", b.alpha, 100.0 * b.share))
+        .collect();
+    eprintln!(
+        "maps {}: {} bases [{}], training relative error {:.4}, {:.1} s",
+        fit.texels_seen,
+        fit.bases.len(),
+        bases.join(", "),
+        fit.train_error,
+        fit.seconds
+    );
+    if let Some(h) = holdout {
+        eprintln!(
+            "held-out photo {}: relative error {:.4} (mean of the other photos: {:.4})",
+            h["photo"], h["relative_error"], h["mean_photo_error"]
+        );
+    }
+}

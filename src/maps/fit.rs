@@ -1,0 +1,1000 @@
+//! Fitting material maps to a photo set (issue #17 item 2, `fit --maps`).
+//!
+//! A flash photo set shows each texel from a handful of directions near the mirror direction,
+//! so a free per-texel fit is ill-posed where no highlight crosses the texel: roughness and F0
+//! then trade against each other along the lobe's tail. The fit makes the problem well posed
+//! the way Lensch et al. 2003 ("Image-based reconstruction of spatial appearance and
+//! geometric detail", section 5: clustering into basis materials) and Nam et al. 2018
+//! (section 4.2: basis BRDFs shared by all points) do: texels are grouped into `K` basis
+//! materials, and each texel's specular parameters are drawn toward its basis by a Gaussian
+//! prior, so a texel the data pin down keeps its own values and a texel they do not takes its
+//! basis's.
+//!
+//! | stage | what | how |
+//! | --- | --- | --- |
+//! | 1 | each texel alone, weak prior toward a generic material | Levenberg-Marquardt per texel from three roughness starts (0.05, 0.2, 0.6) |
+//! | 2 | noise level | `sigma^2 = sum r^2 / (residuals - parameters)` of stage 1, so the data term is a Gaussian log-likelihood and the prior's units are those of the coordinates |
+//! | 3 | `K` basis materials | k-means over the texels' specular coordinates (`ln alpha`, `logit F0`), each coordinate weighted by its Gauss-Newton precision `(J^T J)_jj` (a texel's diagonal Laplace approximation), so poorly seen texels hardly move the bases and are assigned by what is seen of them |
+//! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own |
+//! | 5 | choice of `K` | 1 to `max_bases`, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels; the fewest bases within 2% of the best error are kept and refitted on every photo and texel |
+//!
+//! Texels are independent given the bases, so each is a small dense problem (4 to 9
+//! coordinates: `ln alpha`, `logit F0` RGB unless the Fresnel is known, `logit diffuse` RGB,
+//! and with `normals` two slopes) solved with exact dual-number Jacobians
+//! (`DualSVec64<N>`) through the model's own generic kernel, in parallel over texels and
+//! bit-identical for any thread count. A pixel belongs to the texel its centre sees and is
+//! predicted with that texel's parameters at every sub-sample; texels no pixel sees take the
+//! coordinates of the nearest seen texel.
+//!
+//! Models: the analytic ones (`single`, `fast-msx`, `kulla-conty`, `turquin`). The stochastic
+//! estimators would give each texel a noisy objective from a few dozen records and cost
+//! thousands of walks per texel per iteration; they are refused with that reason.
+
+use super::{normal_from_slopes, to_shading_frame, MaterialMaps, TexelGrid};
+use crate::bsdf::{differentiable, BounceCap, Model, Rng};
+use crate::error::{Error, Result};
+use crate::fit::cholesky::Cholesky;
+use crate::fit::params::{logit, ParamSpace};
+use crate::material::{FresnelSpec, Material};
+use crate::progress::Progress;
+use crate::scalar::{Real, Rgb, Vec3};
+use crate::shading::ShadingRecords;
+use num_dual::DualSVec64;
+use rand::SeedableRng;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::f64::consts::FRAC_1_PI;
+use std::time::Instant;
+
+/// Prior standard deviations (coordinate units), see the module table.
+const SIGMA_LN_ALPHA: f64 = 0.25;
+const SIGMA_LOGIT_F0: f64 = 0.5;
+const SIGMA_WEAK: f64 = 3.0;
+const SIGMA_SLOPE: f64 = 0.25;
+/// A dielectric's F0 (IOR 1.5) and how far from it the prior lets a dielectric go (logit sd
+/// 0.3: F0 0.03 to 0.055 at one sd).
+const DIELECTRIC_F0: f64 = 0.04;
+const SIGMA_DIELECTRIC_F0: f64 = 0.3;
+/// A metal's diffuse albedo: logit(1e-4) with sd 1, i.e. none.
+const METAL_DIFFUSE: f64 = 1e-4;
+const SIGMA_METAL_DIFFUSE: f64 = 1.0;
+/// Stage 1's roughness prior centre and starts.
+const GENERIC_ALPHA: f64 = 0.3;
+const ALPHA_STARTS: [f64; 2] = [0.08, 0.4];
+/// Levenberg-Marquardt iterations per texel and solve.
+const MAX_ITERATIONS: usize = 40;
+/// Rounds of re-assignment and re-fit in stage 4.
+const ROUNDS: usize = 2;
+/// Potts coupling of the basis labels: the posterior cost (twice the negative log posterior)
+/// of each 4-neighbour with another label, and the most sweeps of its minimisation.
+const LABEL_COUPLING: f64 = 6.0;
+const ICM_SWEEPS: usize = 10;
+/// The fewest bases whose validation error is within this fraction of the best are chosen
+/// (the "one standard error" rule of Hastie, Tibshirani & Friedman, *The Elements of
+/// Statistical Learning*, section 7.10: an extra basis that gains less than the noise of the
+/// validation error only fits noise; on the synthetic two-material sets the gains past the
+/// true count are 0.1-0.5%).
+const PARSIMONY: f64 = 0.02;
+
+/// What a maps fit searches.
+#[derive(Clone, Debug)]
+pub struct MapsFitOptions {
+    /// Model, distribution, height model and Fresnel (Schlick F0 per texel, or a known
+    /// Fresnel); roughness is isotropic and the diffuse albedo always fitted.
+    pub model: Model,
+    pub ndf: crate::microfacet::NdfKind,
+    pub height: crate::microfacet::Height,
+    pub known_fresnel: Option<FresnelSpec>,
+    /// Texel grid over the sample.
+    pub grid: TexelGrid,
+    /// Fit a shading normal per texel.
+    pub normals: bool,
+    /// Largest number of basis materials tried.
+    pub max_bases: usize,
+    /// The photo left out to choose the number of bases (index into the records' photos);
+    /// `None` fits `max_bases` bases without a choice.
+    pub validation_photo: Option<usize>,
+    pub progress: bool,
+}
+
+/// A basis material: the centre of its texels' specular coordinates.
+#[derive(Clone, Debug, Serialize)]
+pub struct Basis {
+    pub kind: Kind,
+    pub alpha: f64,
+    /// Schlick F0 (absent with a known Fresnel).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub f0: Option<[f64; 3]>,
+    /// Share of the texels assigned to it.
+    pub share: f64,
+}
+
+/// The validation error of one number of bases.
+#[derive(Clone, Debug, Serialize)]
+pub struct BasisTrial {
+    pub bases: usize,
+    /// Relative RMS error of the validation photo: `sqrt(sum (p - t)^2 / sum t^2)`.
+    pub validation_error: f64,
+}
+
+/// A maps fit: the maps and how they were found.
+#[derive(Clone, Debug, Serialize)]
+pub struct MapsFit {
+    #[serde(skip)]
+    pub maps: MaterialMaps,
+    pub bases: Vec<Basis>,
+    /// Validation error per number of bases (empty without a validation photo).
+    pub basis_trials: Vec<BasisTrial>,
+    /// Noise level of the photos, linear radiance units (stage 2).
+    pub noise_sigma: f64,
+    /// Relative RMS error over the fitted pixels.
+    pub train_error: f64,
+    /// Texels seen by at least one loss pixel.
+    pub texels_seen: usize,
+    pub seconds: f64,
+}
+
+/// The pixels of each texel (compressed rows): pixels with loss weight > 0, by the texel their
+/// centre sub-sample sees.
+struct TexelBlocks {
+    offsets: Vec<usize>,
+    pixels: Vec<usize>,
+    grid: TexelGrid,
+    /// Texels on this stride are in the blocks, the others have no pixels.
+    stride: usize,
+}
+
+impl TexelBlocks {
+    /// The blocks of the texels on a grid of `stride` (1: every texel; 2: every other texel
+    /// of every other row, the texel sample the choice of `K` works on).
+    fn new(records: &ShadingRecords, grid: TexelGrid, stride: usize) -> TexelBlocks {
+        let spp = records.samples_per_pixel;
+        let mut counts = vec![0usize; grid.len() + 1];
+        let texel_of = |p: usize| grid.texel(records.uv[p * spp + spp / 2]);
+        let on_stride = |t: usize| (t % grid.width) % stride == 0 && (t / grid.width) % stride == 0;
+        let used: Vec<usize> = (0..records.pixel_count())
+            .filter(|&p| records.weight[p] > 0.0 && on_stride(texel_of(p)))
+            .collect();
+        for &p in &used {
+            counts[texel_of(p) + 1] += 1;
+        }
+        for t in 0..grid.len() {
+            counts[t + 1] += counts[t];
+        }
+        let mut next = counts.clone();
+        let mut pixels = vec![0; used.len()];
+        for &p in &used {
+            let t = texel_of(p);
+            pixels[next[t]] = p;
+            next[t] += 1;
+        }
+        TexelBlocks {
+            offsets: counts,
+            pixels,
+            grid,
+            stride,
+        }
+    }
+
+    fn of(&self, t: usize) -> &[usize] {
+        &self.pixels[self.offsets[t]..self.offsets[t + 1]]
+    }
+
+    /// The up to four texels a stride away from `t` along the rows and columns.
+    fn neighbours(&self, t: usize) -> impl Iterator<Item = usize> + '_ {
+        let (w, h, d) = (self.grid.width, self.grid.height, self.stride);
+        let (c, r) = (t % w, t / w);
+        [
+            (c >= d).then(|| t - d),
+            (c + d < w).then(|| t + d),
+            (r >= d).then(|| t - d * w),
+            (r + d < h).then(|| t + d * w),
+        ]
+        .into_iter()
+        .flatten()
+    }
+}
+
+/// The per-texel problem: coordinates, prediction and prior.
+struct TexelModel<'a> {
+    space: ParamSpace,
+    normals: bool,
+    records: &'a ShadingRecords,
+}
+
+/// A Gaussian prior per coordinate: centre and precision `1 / sigma^2`, for a texel of `kind`.
+#[derive(Clone, Debug)]
+struct Prior {
+    kind: Kind,
+    centre: Vec<f64>,
+    precision: Vec<f64>,
+}
+
+impl Prior {
+    /// `2 sum ln sigma_j`: added to the MAP cost, it makes the costs of texels under priors of
+    /// different widths comparable (twice the negative log posterior up to a constant).
+    fn log_normaliser(&self) -> f64 {
+        -self.precision.iter().map(|p| p.ln()).sum::<f64>()
+    }
+}
+
+/// What a texel is taken to be: the two cases of the metallic workflow (Burley 2012,
+/// "Physically-based shading at Disney", section 5.3; glTF 2.0 appendix B): a dielectric
+/// (F0 near 0.04, any diffuse albedo) or a metal (coloured F0, no diffuse). Free F0 and albedo
+/// together are not identifiable on rough texels under a flash: a rough metal lobe seen from
+/// near the mirror direction looks like a weaker lobe plus a diffuse term (rough copper at
+/// alpha 0.65 fitted freely came out as F0 0.35 plus albedo 0.67, within the photos' noise).
+/// With a known Fresnel there is one case.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    Dielectric,
+    Metal,
+    Known,
+}
+
+/// One texel's solution.
+#[derive(Clone, Debug)]
+struct TexelFit {
+    kind: Kind,
+    x: Vec<f64>,
+    /// Data cost `sum w r^2` (linear radiance units squared) and residual count.
+    data_cost: f64,
+    residuals: usize,
+    /// Diagonal of `J^T J` of the data term.
+    precision: Vec<f64>,
+}
+
+impl TexelModel<'_> {
+    fn dim(&self) -> usize {
+        self.space.dim() + if self.normals { 2 } else { 0 }
+    }
+
+    /// Number of specular coordinates at the front (`ln alpha`, then `logit F0` RGB unless
+    /// the Fresnel is known): what the bases hold.
+    fn specular_dim(&self) -> usize {
+        if self.space.known_fresnel.is_some() {
+            1
+        } else {
+            4
+        }
+    }
+
+    /// Predictions of `pixels` at coordinates `x`, at any scalar type.
+    fn predict<T: Real>(&self, x: &[T], pixels: &[usize]) -> Vec<[T; 3]> {
+        let base = self.space.dim();
+        let surface = self.space.surface(&x[..base]);
+        let brdf = differentiable(self.space.model, surface.single, BounceCap::NONE)
+            .expect("maps fits take analytic models");
+        let normal = self
+            .normals
+            .then(|| normal_from_slopes(x[base], x[base + 1]));
+        let lambert = surface.diffuse.map(|d| d * T::c(FRAC_1_PI));
+        let spp = self.records.samples_per_pixel;
+        let mut rng = Rng::seed_from_u64(0);
+        pixels
+            .iter()
+            .map(|&p| {
+                let mut sum = [T::zero(); 3];
+                for s in p * spp..(p + 1) * spp {
+                    let e = self.records.irradiance[s];
+                    if e == [0.0; 3] {
+                        continue;
+                    }
+                    let (wi, wo) = (
+                        Vec3::<T>::from_f64(self.records.wi[s]),
+                        Vec3::<T>::from_f64(self.records.wo[s]),
+                    );
+                    let (wi_l, wo_l, ratio) = match normal {
+                        None => (wi, wo, T::one()),
+                        Some(n) => {
+                            let (i, o) = (to_shading_frame(n, wi), to_shading_frame(n, wo));
+                            if i.z.re64() <= 0.0 || o.z.re64() <= 0.0 {
+                                continue;
+                            }
+                            (i, o, i.z / wi.z)
+                        }
+                    };
+                    let Rgb(f) = brdf.eval_total(wi_l, wo_l, &mut rng);
+                    for c in 0..3 {
+                        sum[c] += (f[c] + lambert[c]) * ratio * T::c(e[c]);
+                    }
+                }
+                sum.map(|v| v / T::c(spp as f64))
+            })
+            .collect()
+    }
+
+    /// `(cost, gradient, Gauss-Newton matrix, data cost, data precision)` of the texel's MAP
+    /// objective `sum w (p - t)^2 / sigma^2 + sum precision (x - centre)^2` at `x`.
+    fn linearise<const N: usize>(
+        &self,
+        x: &[f64],
+        pixels: &[usize],
+        sigma2: f64,
+        prior: &Prior,
+    ) -> (f64, Vec<f64>, Vec<f64>, f64, Vec<f64>) {
+        let coords: Vec<DualSVec64<N>> = x
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| DualSVec64::from_re(v).derivative(i))
+            .collect();
+        let predicted = self.predict(&coords, pixels);
+        let mut gradient = vec![0.0; N];
+        let mut matrix = vec![0.0; N * N];
+        let mut data_cost = 0.0;
+        for (value, &p) in predicted.iter().zip(pixels) {
+            let w = self.records.weight[p];
+            for (v, t) in value.iter().zip(self.records.target[p]) {
+                let r = v.re - t;
+                let j: [f64; N] = v.eps.0.map_or([0.0; N], |d| d.into());
+                data_cost += w * r * r;
+                for a in 0..N {
+                    gradient[a] += w * r * j[a] / sigma2;
+                    for b in 0..=a {
+                        matrix[a * N + b] += w * j[a] * j[b] / sigma2;
+                    }
+                }
+            }
+        }
+        let data_precision: Vec<f64> = (0..N).map(|a| matrix[a * N + a]).collect();
+        let mut cost = data_cost / sigma2;
+        for a in 0..N {
+            let d = x[a] - prior.centre[a];
+            cost += prior.precision[a] * d * d;
+            gradient[a] += prior.precision[a] * d;
+            matrix[a * N + a] += prior.precision[a];
+            for b in 0..a {
+                matrix[b * N + a] = matrix[a * N + b];
+            }
+        }
+        (cost, gradient, matrix, data_cost, data_precision)
+    }
+
+    /// The MAP objective at `x` in `f64`.
+    fn cost(&self, x: &[f64], pixels: &[usize], sigma2: f64, prior: &Prior) -> f64 {
+        let predicted = self.predict(x, pixels);
+        let mut cost = 0.0;
+        for (value, &p) in predicted.iter().zip(pixels) {
+            for (v, t) in value.iter().zip(self.records.target[p]) {
+                cost += self.records.weight[p] * (v - t).powi(2) / sigma2;
+            }
+        }
+        cost + (0..x.len())
+            .map(|a| prior.precision[a] * (x[a] - prior.centre[a]).powi(2))
+            .sum::<f64>()
+    }
+
+    /// Levenberg-Marquardt (Marquardt's diagonal scaling) from `x`, exact Jacobians.
+    fn solve<const N: usize>(
+        &self,
+        mut x: Vec<f64>,
+        pixels: &[usize],
+        sigma2: f64,
+        prior: &Prior,
+    ) -> TexelFit {
+        if pixels.is_empty() {
+            return TexelFit {
+                kind: prior.kind,
+                x,
+                data_cost: 0.0,
+                residuals: 0,
+                precision: vec![0.0; N],
+            };
+        }
+        let mut damping = 1e-3;
+        let (mut cost, mut gradient, mut matrix, mut data_cost, mut precision) =
+            self.linearise::<N>(&x, pixels, sigma2, prior);
+        for _ in 0..MAX_ITERATIONS {
+            let mut improved = false;
+            for _ in 0..10 {
+                let mut damped = matrix.clone();
+                for a in 0..N {
+                    damped[a * N + a] += damping * matrix[a * N + a].max(1e-12);
+                }
+                let Some(factor) = Cholesky::new(&damped, N) else {
+                    damping *= 10.0;
+                    continue;
+                };
+                let step = factor.solve(&gradient);
+                let trial: Vec<f64> = x
+                    .iter()
+                    .zip(&step)
+                    .map(|(v, s)| v - s.clamp(-2.0, 2.0))
+                    .collect();
+                let trial_cost = self.cost(&trial, pixels, sigma2, prior);
+                if trial_cost < cost {
+                    let gain = cost - trial_cost;
+                    x = trial;
+                    (cost, gradient, matrix, data_cost, precision) =
+                        self.linearise::<N>(&x, pixels, sigma2, prior);
+                    damping = (damping / 3.0).max(1e-9);
+                    improved = gain > 1e-9 * cost.max(1e-12);
+                    break;
+                }
+                damping *= 4.0;
+            }
+            if !improved {
+                break;
+            }
+        }
+        TexelFit {
+            kind: prior.kind,
+            x,
+            data_cost,
+            residuals: 3 * pixels.len(),
+            precision,
+        }
+    }
+
+    /// [`TexelModel::solve`] with `N` = [`TexelModel::dim`].
+    fn solve_any(&self, x: Vec<f64>, pixels: &[usize], sigma2: f64, prior: &Prior) -> TexelFit {
+        match self.dim() {
+            2 => self.solve::<2>(x, pixels, sigma2, prior),
+            4 => self.solve::<4>(x, pixels, sigma2, prior),
+            5 => self.solve::<5>(x, pixels, sigma2, prior),
+            6 => self.solve::<6>(x, pixels, sigma2, prior),
+            7 => self.solve::<7>(x, pixels, sigma2, prior),
+            9 => self.solve::<9>(x, pixels, sigma2, prior),
+            n => unreachable!("a maps fit has 4 to 9 coordinates, not {n}"),
+        }
+    }
+
+    /// The kinds a texel may be.
+    fn kinds(&self) -> &'static [Kind] {
+        if self.space.known_fresnel.is_some() {
+            &[Kind::Known]
+        } else {
+            &[Kind::Dielectric, Kind::Metal]
+        }
+    }
+
+    /// The prior of a texel of `kind` whose specular coordinates (`ln alpha`, then `logit F0`
+    /// RGB unless known) are drawn toward `specular` with standard deviations `sigma`; the
+    /// diffuse albedo and slopes as in the module table.
+    fn prior(&self, kind: Kind, specular: &[f64], sigma: [f64; 2]) -> Prior {
+        let dim = self.dim();
+        let (mut centre, mut sd) = (vec![0.0; dim], vec![SIGMA_WEAK; dim]);
+        centre[0] = specular[0];
+        sd[0] = sigma[0];
+        let diffuse_at = match kind {
+            Kind::Known => 1,
+            Kind::Dielectric | Kind::Metal => {
+                for c in 1..4 {
+                    (centre[c], sd[c]) = match kind {
+                        Kind::Dielectric => (specular[c], SIGMA_DIELECTRIC_F0.min(sigma[1])),
+                        _ => (specular[c], sigma[1]),
+                    };
+                }
+                4
+            }
+        };
+        if kind == Kind::Metal {
+            for c in diffuse_at..diffuse_at + 3 {
+                (centre[c], sd[c]) = (logit(METAL_DIFFUSE), SIGMA_METAL_DIFFUSE);
+            }
+        }
+        sd[self.space.dim()..].fill(SIGMA_SLOPE);
+        Prior {
+            kind,
+            centre,
+            precision: sd.iter().map(|s| 1.0 / (s * s)).collect(),
+        }
+    }
+
+    /// Stage 1's prior of `kind`: roughness near 0.3 (weakly), a dielectric's F0 near 0.04, a
+    /// metal's F0 anywhere.
+    fn generic_prior(&self, kind: Kind) -> Prior {
+        let f0 = match kind {
+            Kind::Dielectric => logit(DIELECTRIC_F0),
+            _ => 0.0,
+        };
+        self.prior(kind, &[GENERIC_ALPHA.ln(), f0, f0, f0], [2.0, SIGMA_WEAK])
+    }
+
+    /// `x` with its specular coordinates moved to `prior`'s centre and, for a metal, its
+    /// diffuse albedo to none: where a texel starts when it joins a basis.
+    fn moved_to(&self, x: &[f64], prior: &Prior) -> Vec<f64> {
+        let mut moved = x.to_vec();
+        let specular = self.specular_dim();
+        moved[..specular].copy_from_slice(&prior.centre[..specular]);
+        if prior.kind == Kind::Metal {
+            moved[specular..specular + 3].copy_from_slice(&prior.centre[specular..specular + 3]);
+        }
+        moved
+    }
+
+    /// A start for a texel of `kind` with roughness `alpha`.
+    fn start(&self, kind: Kind, alpha: f64) -> Vec<f64> {
+        let (f0, diffuse) = match kind {
+            Kind::Metal => (0.7, METAL_DIFFUSE),
+            _ => (DIELECTRIC_F0, 0.3),
+        };
+        let material = Material {
+            model: self.space.model,
+            ndf: self.space.ndf,
+            height: self.space.height,
+            alpha: [alpha; 2],
+            fresnel: FresnelSpec::Schlick { f0: [f0; 3] },
+            diffuse: [diffuse; 3],
+        };
+        let mut x = self.space.point(&material, 1.0);
+        if self.normals {
+            x.extend([0.0, 0.0]);
+        }
+        x
+    }
+}
+
+/// Fits maps to `records` (built with targets, from a capture: texture coordinates needed).
+pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<MapsFit> {
+    let start = Instant::now();
+    let probe = Material {
+        model: options.model,
+        ndf: options.ndf,
+        height: options.height,
+        alpha: [GENERIC_ALPHA; 2],
+        fresnel: FresnelSpec::White,
+        diffuse: [0.0; 3],
+    };
+    if probe.brdf().is_stochastic() {
+        return Err(Error::argument(
+            "--models",
+            format!(
+                "{} is stochastic: a maps fit would give each texel a noisy objective from a \
+                 few dozen records; maps fits take single, fast-msx, kulla-conty or turquin",
+                options.model
+            ),
+        ));
+    }
+    if records.uv.len() != records.wi.len() {
+        return Err(Error::argument(
+            "--maps",
+            "a maps fit needs records built from a photo set",
+        ));
+    }
+    let space = ParamSpace {
+        diffuse: true,
+        known_fresnel: options.known_fresnel,
+        ndf: options.ndf,
+        height: options.height,
+        ..ParamSpace::plain(options.model)
+    };
+    let model = TexelModel {
+        space,
+        normals: options.normals,
+        records,
+    };
+    let trials = match options.validation_photo {
+        Some(_) if options.max_bases > 1 => options.max_bases,
+        _ => 0,
+    };
+    let mut progress = Progress::new("maps fit", (trials + 1 + 2) as u64);
+    let mut step = 0u64;
+    let mut tick = |what: &str| {
+        step += 1;
+        if options.progress {
+            progress.update(step, || what.to_string());
+        }
+    };
+
+    // Stage 5: the number of bases, by a validation photo, on every other texel of every
+    // other row (a quarter of the work; the bases are global, so a texel sample finds them).
+    let mut basis_trials = Vec::new();
+    let mut bases = options.max_bases;
+    if let (Some(photo), true) = (options.validation_photo, trials > 0) {
+        let training = records.restricted_to_photos(|i| i != photo);
+        let held_out = TexelModel {
+            records: &training,
+            ..model
+        };
+        let blocks = TexelBlocks::new(&training, options.grid, 2);
+        let sampled = TexelBlocks::new(records, options.grid, 2);
+        let validation: Vec<usize> = sampled
+            .pixels
+            .iter()
+            .copied()
+            .filter(|&p| records.photos[photo].pixels().contains(&p))
+            .collect();
+        let first = independent_texels(&held_out, &blocks);
+        tick("texels alone (choosing K)");
+        for k in 1..=options.max_bases {
+            let fits = basis_fits(&held_out, &blocks, &first, k);
+            let predicted = maps_prediction(&model, &fits.texels, options.grid, &validation);
+            let error = relative_error(&predicted, records, &validation);
+            tick(&format!("{k} bases: validation error {error:.4}"));
+            basis_trials.push(BasisTrial {
+                bases: k,
+                validation_error: error,
+            });
+        }
+        let best = basis_trials
+            .iter()
+            .map(|t| t.validation_error)
+            .fold(f64::INFINITY, f64::min);
+        bases = basis_trials
+            .iter()
+            .find(|t| t.validation_error <= (1.0 + PARSIMONY) * best)
+            .map_or(1, |t| t.bases);
+    }
+    let blocks = TexelBlocks::new(records, options.grid, 1);
+    let first = independent_texels(&model, &blocks);
+    tick("texels alone");
+    let mut fits = basis_fits(&model, &blocks, &first, bases);
+    fill_unseen(&mut fits.texels, &blocks);
+    tick(&format!("{bases} bases"));
+    progress.finish();
+    let train_error = relative_error(
+        &maps_prediction(&model, &fits.texels, options.grid, &blocks.pixels),
+        records,
+        &blocks.pixels,
+    );
+    Ok(MapsFit {
+        maps: to_maps(&model, options, &fits.texels),
+        bases: fits.bases,
+        basis_trials,
+        noise_sigma: first.sigma2.sqrt(),
+        train_error,
+        texels_seen: (0..options.grid.len())
+            .filter(|&t| !blocks.of(t).is_empty())
+            .count(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Stages 1 and 2: every texel alone, of either kind, and the noise level.
+struct Independent {
+    texels: Vec<TexelFit>,
+    sigma2: f64,
+}
+
+fn independent_texels(model: &TexelModel, blocks: &TexelBlocks) -> Independent {
+    let dim = model.dim();
+    // The data term's scale before the noise is known: 1% of the RMS target.
+    let (mut sum, mut count) = (0.0, 0.0f64);
+    for &p in &blocks.pixels {
+        sum += model.records.target[p].iter().map(|v| v * v).sum::<f64>();
+        count += 3.0;
+    }
+    let scale2 = (sum / count.max(1.0)).max(1e-30) * 1e-4;
+    let texel_count = blocks.offsets.len() - 1;
+    let texels: Vec<TexelFit> = (0..texel_count)
+        .into_par_iter()
+        .map(|t| {
+            let pixels = blocks.of(t);
+            let mut best: Option<(f64, TexelFit)> = None;
+            for &kind in model.kinds() {
+                let prior = model.generic_prior(kind);
+                for &alpha in &ALPHA_STARTS {
+                    let fit = model.solve_any(model.start(kind, alpha), pixels, scale2, &prior);
+                    let cost = model.cost(&fit.x, pixels, scale2, &prior);
+                    if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                        best = Some((cost, fit));
+                    }
+                    if pixels.is_empty() {
+                        break;
+                    }
+                }
+            }
+            best.expect("at least one kind and start").1
+        })
+        .collect();
+    let residuals: usize = texels.iter().map(|f| f.residuals).sum();
+    let seen = texels.iter().filter(|f| f.residuals > 0).count();
+    let data: f64 = texels.iter().map(|f| f.data_cost).sum();
+    let dof = residuals.saturating_sub(seen * dim).max(1);
+    Independent {
+        texels,
+        sigma2: (data / dof as f64).max(1e-30),
+    }
+}
+
+/// Stages 3 and 4 for `k` bases.
+struct BasisFits {
+    texels: Vec<TexelFit>,
+    bases: Vec<Basis>,
+}
+
+fn basis_fits(
+    model: &TexelModel,
+    blocks: &TexelBlocks,
+    first: &Independent,
+    k: usize,
+) -> BasisFits {
+    let specular = model.specular_dim();
+    let sigma2 = first.sigma2;
+    let mut texels = first.texels.clone();
+    let seen: Vec<usize> = (0..texels.len())
+        .filter(|&t| !blocks.of(t).is_empty())
+        .collect();
+    let mut clusters = weighted_kmeans(&texels, &seen, specular, k);
+    for round in 0..ROUNDS {
+        let priors: Vec<Prior> = clusters
+            .centres
+            .iter()
+            .zip(&clusters.kinds)
+            .map(|(centre, &kind)| model.prior(kind, centre, [SIGMA_LN_ALPHA, SIGMA_LOGIT_F0]))
+            .collect();
+        if round == 0 {
+            // The texel solved under every basis, each from its own coordinates moved to the
+            // basis; the labels are then chosen together (`label_smoothing`).
+            let candidates: Vec<Vec<(f64, TexelFit)>> = (0..texels.len())
+                .into_par_iter()
+                .map(|t| {
+                    let pixels = blocks.of(t);
+                    (0..priors.len())
+                        .map(|b| {
+                            let start = model.moved_to(&texels[t].x, &priors[b]);
+                            let fit = model.solve_any(start, pixels, sigma2, &priors[b]);
+                            let posterior = model.cost(&fit.x, pixels, sigma2, &priors[b])
+                                + priors[b].log_normaliser();
+                            (posterior, fit)
+                        })
+                        .collect()
+                })
+                .collect();
+            clusters.assignment = label_smoothing(&candidates, blocks);
+            texels = candidates
+                .into_iter()
+                .zip(&clusters.assignment)
+                .map(|(mut options, &b)| options.swap_remove(b).1)
+                .collect();
+        } else {
+            texels = (0..texels.len())
+                .into_par_iter()
+                .map(|t| {
+                    let prior = &priors[clusters.assignment[t]];
+                    model.solve_any(texels[t].x.clone(), blocks.of(t), sigma2, prior)
+                })
+                .collect();
+        }
+        clusters.recentre(&texels, &seen, specular);
+    }
+    let total = clusters.assignment.len().max(1) as f64;
+    let bases = clusters
+        .centres
+        .iter()
+        .zip(&clusters.kinds)
+        .enumerate()
+        .map(|(c, (centre, &kind))| Basis {
+            kind,
+            alpha: centre[0].exp(),
+            f0: (specular == 4).then(|| [1, 2, 3].map(|j| crate::fit::params::sigmoid(centre[j]))),
+            share: clusters.assignment.iter().filter(|&&a| a == c).count() as f64 / total,
+        })
+        .collect();
+    BasisFits { texels, bases }
+}
+
+/// Labels of the texels from each texel's posterior cost under each basis (`candidates`,
+/// twice the negative log posterior) and a Potts prior on neighbouring labels (a material
+/// region is rarely one texel): `LABEL_COUPLING` per 4-neighbour of another basis, minimised
+/// by iterated conditional modes (Besag 1986, "On the statistical analysis of dirty pictures",
+/// section 2.5) in red-black order, so the result does not depend on the thread count.
+/// Unseen texels take no part (they are filled afterwards).
+fn label_smoothing(candidates: &[Vec<(f64, TexelFit)>], blocks: &TexelBlocks) -> Vec<usize> {
+    let own_best = |t: usize| {
+        (0..candidates[t].len())
+            .min_by(|&a, &b| candidates[t][a].0.total_cmp(&candidates[t][b].0))
+            .expect("k >= 1")
+    };
+    let mut labels: Vec<usize> = (0..candidates.len()).map(own_best).collect();
+    let seen = |t: usize| !blocks.of(t).is_empty();
+    let width = blocks.grid.width;
+    for _ in 0..ICM_SWEEPS {
+        let mut changed = false;
+        for parity in 0..2 {
+            let next: Vec<usize> = (0..candidates.len())
+                .into_par_iter()
+                .map(|t| {
+                    let (c, r) = (t % width / blocks.stride, t / width / blocks.stride);
+                    if !seen(t) || (c + r) % 2 != parity {
+                        return labels[t];
+                    }
+                    (0..candidates[t].len())
+                        .min_by(|&a, &b| {
+                            let energy = |l: usize| {
+                                let disagree = blocks
+                                    .neighbours(t)
+                                    .filter(|&n| seen(n) && labels[n] != l)
+                                    .count();
+                                candidates[t][l].0 + LABEL_COUPLING * disagree as f64
+                            };
+                            energy(a).total_cmp(&energy(b))
+                        })
+                        .expect("k >= 1")
+                })
+                .collect();
+            changed |= next != labels;
+            labels = next;
+        }
+        if !changed {
+            break;
+        }
+    }
+    labels
+}
+
+/// The bases of a clustering: centres of the specular coordinates, each basis's kind, and each
+/// texel's basis.
+struct Clusters {
+    centres: Vec<Vec<f64>>,
+    kinds: Vec<Kind>,
+    assignment: Vec<usize>,
+}
+
+impl Clusters {
+    /// Each centre becomes the precision-weighted mean of its texels' first `dim` coordinates.
+    fn recentre(&mut self, texels: &[TexelFit], seen: &[usize], dim: usize) {
+        let k = self.centres.len();
+        let mut sums = vec![vec![0.0; dim]; k];
+        let mut weights = vec![vec![0.0; dim]; k];
+        for &t in seen {
+            for j in 0..dim {
+                let w = texels[t].precision[j].max(1e-9);
+                sums[self.assignment[t]][j] += w * texels[t].x[j];
+                weights[self.assignment[t]][j] += w;
+            }
+        }
+        for c in 0..k {
+            for j in 0..dim {
+                if weights[c][j] > 0.0 {
+                    self.centres[c][j] = sums[c][j] / weights[c][j];
+                }
+            }
+        }
+    }
+}
+
+/// Weighted k-means: centres of `dim` leading coordinates, each texel's coordinate weighted by
+/// its data precision; deterministic farthest-point start from the most precise texel. A
+/// basis is of the kind most of its texels are.
+fn weighted_kmeans(texels: &[TexelFit], seen: &[usize], dim: usize, k: usize) -> Clusters {
+    let distance = |t: usize, centre: &[f64]| -> f64 {
+        (0..dim)
+            .map(|j| texels[t].precision[j].max(1e-9) * (texels[t].x[j] - centre[j]).powi(2))
+            .sum()
+    };
+    let total_precision = |t: usize| (0..dim).map(|j| texels[t].precision[j]).sum::<f64>();
+    let mut centres: Vec<Vec<f64>> = Vec::new();
+    match seen
+        .iter()
+        .max_by(|&&a, &&b| total_precision(a).total_cmp(&total_precision(b)))
+    {
+        Some(&first) => centres.push(texels[first].x[..dim].to_vec()),
+        None => centres.push(texels[0].x[..dim].to_vec()),
+    }
+    while centres.len() < k {
+        let gap = |t: usize| {
+            centres
+                .iter()
+                .map(|c| distance(t, c))
+                .fold(f64::INFINITY, f64::min)
+        };
+        match seen
+            .iter()
+            .copied()
+            .max_by(|&a, &b| gap(a).total_cmp(&gap(b)))
+        {
+            Some(t) => centres.push(texels[t].x[..dim].to_vec()),
+            None => centres.push(centres[0].clone()),
+        }
+    }
+    let nearest = |t: usize, centres: &[Vec<f64>]| {
+        (0..centres.len())
+            .min_by(|&a, &b| distance(t, &centres[a]).total_cmp(&distance(t, &centres[b])))
+            .expect("k >= 1")
+    };
+    let mut clusters = Clusters {
+        centres,
+        kinds: Vec::new(),
+        assignment: vec![usize::MAX; texels.len()],
+    };
+    for _ in 0..50 {
+        let next: Vec<usize> = (0..texels.len())
+            .map(|t| nearest(t, &clusters.centres))
+            .collect();
+        let changed = next != clusters.assignment;
+        clusters.assignment = next;
+        clusters.recentre(texels, seen, dim);
+        if !changed {
+            break;
+        }
+    }
+    let assignment = &clusters.assignment;
+    let kinds = (0..k)
+        .map(|c| {
+            let members = seen.iter().filter(|&&t| assignment[t] == c);
+            let metals = members
+                .clone()
+                .filter(|&&t| texels[t].kind == Kind::Metal)
+                .count();
+            match members.clone().next().map(|&t| texels[t].kind) {
+                Some(Kind::Known) => Kind::Known,
+                None => texels[0].kind,
+                Some(_) if 2 * metals > members.count() => Kind::Metal,
+                Some(_) => Kind::Dielectric,
+            }
+        })
+        .collect();
+    clusters.kinds = kinds;
+    clusters
+}
+
+/// Texels no pixel sees take the coordinates of the nearest seen texel in index order
+/// (outward in both directions along the row-major order: enough for the thin unseen borders
+/// of rectified photo sets).
+fn fill_unseen(texels: &mut [TexelFit], blocks: &TexelBlocks) {
+    let count = texels.len();
+    let seen: Vec<usize> = (0..count).filter(|&t| !blocks.of(t).is_empty()).collect();
+    if seen.is_empty() {
+        return;
+    }
+    for t in 0..count {
+        if blocks.of(t).is_empty() {
+            let nearest = seen
+                .iter()
+                .copied()
+                .min_by_key(|&s| s.abs_diff(t))
+                .expect("some texel is seen");
+            texels[t].x = texels[nearest].x.clone();
+        }
+    }
+}
+
+/// The maps of per-texel coordinates.
+fn to_maps(model: &TexelModel, options: &MapsFitOptions, texels: &[TexelFit]) -> MaterialMaps {
+    let base_dim = model.space.dim();
+    let materials: Vec<Material> = texels
+        .iter()
+        .map(|f| model.space.material(&f.x[..base_dim]))
+        .collect();
+    let base = materials[0].clone();
+    MaterialMaps {
+        grid: options.grid,
+        diffuse: Some(materials.iter().map(|m| m.diffuse).collect()),
+        specular: options
+            .known_fresnel
+            .is_none()
+            .then(|| materials.iter().map(|m| m.fresnel.f0()).collect()),
+        roughness: Some(materials.iter().map(|m| m.alpha[0]).collect()),
+        normal: options.normals.then(|| {
+            texels
+                .iter()
+                .map(|f| normal_from_slopes(f.x[base_dim], f.x[base_dim + 1]).re())
+                .collect()
+        }),
+        base,
+    }
+}
+
+/// Predictions of `pixels` (of any photo) with per-texel coordinates, each pixel by the texel
+/// its centre sees.
+fn maps_prediction(
+    model: &TexelModel,
+    texels: &[TexelFit],
+    grid: TexelGrid,
+    pixels: &[usize],
+) -> Vec<[f64; 3]> {
+    let spp = model.records.samples_per_pixel;
+    pixels
+        .par_iter()
+        .map(|&p| {
+            let t = grid.texel(model.records.uv[p * spp + spp / 2]);
+            model.predict(&texels[t].x, &[p])[0]
+        })
+        .collect()
+}
+
+/// `sqrt(sum w (p - t)^2 / sum w t^2)` over `pixels`.
+pub fn relative_error(predicted: &[[f64; 3]], records: &ShadingRecords, pixels: &[usize]) -> f64 {
+    let (mut error, mut signal) = (0.0, 0.0);
+    for (value, &p) in predicted.iter().zip(pixels) {
+        let w = records.weight[p];
+        for (v, t) in value.iter().zip(records.target[p]) {
+            error += w * (v - t).powi(2);
+            signal += w * t * t;
+        }
+    }
+    (error / signal.max(1e-300)).sqrt()
+}
