@@ -4,7 +4,7 @@
 # geometry), references rendered with 64 walks per pixel; each set is fitted with `single`,
 # `kulla-conty` and `bitterli` (the position-free estimator of heitz's model: same value).
 # The rough sets are fitted with 16 walks per pixel: at 4, the pair loss's own noise is as
-# large as the signal of alpha near 0.8 (see the README, "stochastic models").
+# large as the signal of alpha near 0.8 (see docs/reference.md, "stochastic models").
 # Prints one line per fit: model, metal, alpha, alpha error, largest F0 error, seconds.
 # Takes about 15 minutes on 2 cores. Usage: scripts/heitz-recovery.sh [OUT_DIR]
 set -euo pipefail

@@ -285,8 +285,8 @@ fn mitsuba_multi_bounce_fit_states_the_missing_energy() {
     let notes = comments(&document);
     assert!(notes.contains("kulla-conty"), "{notes}");
     let (single, model, percent) = stated_energy(&notes);
-    // Kulla-Conty conserves energy to its table error (< 1%, README); single GGX at alpha 0.29
-    // keeps 0.884 at normal incidence (an independent 2000 x 4000 midpoint quadrature of
+    // Kulla-Conty conserves energy to its table error (< 1%, docs/models.md); single GGX at
+    // alpha 0.29 keeps 0.884 at normal incidence (an independent 2000 x 4000 midpoint quadrature of
     // D G2 / 4 gives 0.88422), and the percentage is what the two numbers say.
     assert!((model - 1.0).abs() < 0.01, "{model}");
     assert!((single - 0.88422).abs() < 2e-3, "{single}");

@@ -102,7 +102,7 @@ pub struct FitOptionArgs {
     pub real: RealCaptureArgs,
 }
 
-/// Options for real captures (README "Real flash captures").
+/// Options for real captures (docs/real-captures.md).
 #[derive(clap::Args, Debug, Clone)]
 pub struct RealCaptureArgs {
     /// Fit one global exposure scale (true / nominal light power) with the material and report

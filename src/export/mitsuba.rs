@@ -95,8 +95,8 @@ impl Scene {
     }
 
     /// The default flash setup: a 10 x 10 sample, a 30 degree camera 30 units above its centre
-    /// (128 x 128 pixels), and a point light of intensity 1000 at the camera (the README's
-    /// example capture).
+    /// (128 x 128 pixels), and a point light of intensity 1000 at the camera (the example
+    /// capture in docs/files.md).
     pub fn default_flash(reason: &str) -> Scene {
         Scene {
             source: format!("default flash setup ({reason})"),

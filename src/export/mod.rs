@@ -446,7 +446,7 @@ mod tests {
         let conversion =
             Conversion::new(&material(Model::KullaConty, FresnelSpec::White, [0.0; 3]));
         let energy = conversion.energy().unwrap();
-        // Kulla-Conty conserves energy up to its table error (< 1%, README); single at
+        // Kulla-Conty conserves energy up to its table error (< 1%, docs/models.md); single at
         // alpha 0.4 keeps less.
         assert!((energy.model - 1.0).abs() < 0.01, "{energy:?}");
         assert!(energy.single < energy.model - 0.01, "{energy:?}");

@@ -32,8 +32,8 @@
 //! `fast-msx` and the stochastic estimators); `turquin` scales the single lobe, so its added
 //! term has the single lobe's sharpness and is evaluated exactly. `faint-multi` applies to the
 //! energy-conserving models whose multiple scattering is bounded by the energy single
-//! scattering loses; `fast-msx` is not (its lobe can exceed it, see the README), so it keeps its
-//! term.
+//! scattering loses; `fast-msx` is not (its lobe can exceed it, see docs/models.md), so it
+//! keeps its term.
 
 use super::anchors::Anchors;
 use super::repeated::Repeated;
