@@ -9,3 +9,5 @@ $bin synth --material datasets/sources/copper-a03.material.json \
   --capture datasets/sources/copper-flash.capture.toml -o datasets/copper-flash --force
 $bin synth --material datasets/sources/aluminium-a05.material.json \
   --capture datasets/sources/aluminium-pinhole.capture.toml -o datasets/aluminium-pinhole --force
+$bin synth --material datasets/sources/two-materials.material.json \
+  --capture datasets/sources/two-materials.capture.toml -o datasets/two-materials --noise 0.01 --force

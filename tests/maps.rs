@@ -192,6 +192,21 @@ fn maps_fits_recover_known_maps_and_single_bounce_predicts_worse() {
     );
 }
 
+/// Writes the bundled maps source, `datasets/sources/two-materials.material.json` and its
+/// `two-materials.material.maps/` (the truth of `datasets/two-materials`, made by `datasets/make.sh`):
+/// the truth of the recovery test at 128 x 128. Run with `--ignored` after changing
+/// [`truth_maps`].
+#[test]
+#[ignore]
+fn regenerate_bundled_maps_source() {
+    truth_maps(Model::KullaConty, 128)
+        .save(
+            &repo("datasets/sources/two-materials.material.json"),
+            Default::default(),
+        )
+        .unwrap();
+}
+
 /// A maps material file with the given `maps` object, in `dir`.
 fn maps_file(dir: &Path, name: &str, maps: serde_json::Value) -> PathBuf {
     let path = dir.join(name);
