@@ -206,7 +206,9 @@ fn agrees_with_heitz_on_the_bench_configurations() {
     use crate::bench::estimators::configurations;
     use crate::bsdf::Model;
     let configs = configurations(128, 5);
-    let rows: Vec<(bool, [f64; 3], [f64; 3], [f64; 3])> = configs
+    // (white Fresnel, tabulated value, heitz mean, heitz standard error) per configuration.
+    type Measured = (bool, [f64; 3], [f64; 3], [f64; 3]);
+    let rows: Vec<Measured> = configs
         .par_iter()
         .enumerate()
         .map(|(k, config)| {
