@@ -197,10 +197,16 @@ impl<T: Real> Tabulated<T> {
         let ndf = single.microfacet.ndf;
         let alpha = (single.microfacet.ax * single.microfacet.ay).sqrt();
         let albedo = AlbedoTable::get(ndf, Height::Correlated);
-        let rho = (T::one() - albedo.e_avg(alpha)).max_c(1e-300);
+        let rho = (T::one() - albedo.e_avg(alpha)).max_c(0.0);
         let f_avg = fresnel_average(&single.fresnel);
         let tail = f_avg.map(|f| f.powi(4) * (T::one() - rho) / (T::one() - f * rho));
-        let scale = (T::c(std::f64::consts::PI) * rho).recip();
+        // As `kulla-conty`: below 1e-9 of lost energy the lobe is nothing, and `f_kc` would
+        // divide the table's `1 - E(mu)` (interpolated, not exactly 0 at grazing) by ~0.
+        let scale = if rho.re64() < 1e-9 {
+            T::zero()
+        } else {
+            (T::c(std::f64::consts::PI) * rho).recip()
+        };
         Tabulated {
             single,
             table: HeitzTable::get(ndf),
