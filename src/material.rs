@@ -326,6 +326,7 @@ impl Material {
             Model::FastMsx => Box::new(crate::bsdf::fast_msx::FastMsx { single }),
             Model::KullaConty => Box::new(crate::bsdf::kulla_conty::KullaConty::new(single)),
             Model::Turquin => Box::new(crate::bsdf::turquin::Turquin::new(single)),
+            Model::Tabulated => Box::new(crate::bsdf::tabulated::Tabulated::new(single)),
             Model::Bitterli => {
                 Box::new(crate::bsdf::bitterli::Bitterli::new(mf, fresnel).with_bounce_cap(cap))
             }

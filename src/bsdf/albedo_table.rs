@@ -55,6 +55,21 @@ pub(crate) fn embedded_slot(bytes: &[u8], slot: usize, len: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Cell of `x` on `count` nodes log-uniform in `[min, max]`: the lower node and the weight of
+/// the upper one, linear in `ln x` (a dual number carries its derivative). Clamped to the
+/// grid, where the weight is a constant.
+pub(crate) fn log_cell<T: Real>(x: T, min: f64, max: f64, count: usize) -> (usize, T) {
+    let scaled = (x.ln() - T::c(min.ln())) * T::c((count - 1) as f64 / (max.ln() - min.ln()));
+    let s = scaled.re64().clamp(0.0, (count - 1) as f64 - 1e-9);
+    let i = s as usize;
+    let t = if scaled.re64() <= 0.0 || scaled.re64() >= (count - 1) as f64 {
+        T::c(s - i as f64)
+    } else {
+        scaled - T::c(i as f64)
+    };
+    (i, t)
+}
+
 impl AlbedoTable {
     /// The table of `(ndf, height)`, read from the embedded data on first use.
     pub fn get(ndf: NdfKind, height: Height) -> &'static AlbedoTable {
@@ -93,16 +108,7 @@ impl AlbedoTable {
 
     /// Position of `alpha` on the log grid: lower index and weight of the upper node.
     fn alpha_cell<T: Real>(alpha: T) -> (usize, T) {
-        let scaled = (alpha.ln() - T::c(ALPHA_MIN.ln()))
-            * T::c((ALPHA_COUNT - 1) as f64 / (ALPHA_MAX.ln() - ALPHA_MIN.ln()));
-        let s = scaled.re64().clamp(0.0, (ALPHA_COUNT - 1) as f64 - 1e-9);
-        let i = s as usize;
-        let t = if scaled.re64() <= 0.0 || scaled.re64() >= (ALPHA_COUNT - 1) as f64 {
-            T::c(s - i as f64)
-        } else {
-            scaled - T::c(i as f64)
-        };
-        (i, t)
+        log_cell(alpha, ALPHA_MIN, ALPHA_MAX, ALPHA_COUNT)
     }
 
     /// `E(mu, alpha)`: white directional albedo of `single` at incidence cosine `mu`.

@@ -1,10 +1,12 @@
-//! Tests of the analytic multi-bounce models `fast-msx`, `kulla-conty` and `turquin`.
+//! Tests of the analytic multi-bounce models `fast-msx`, `kulla-conty`, `turquin` and
+//! `tabulated` (its agreement with `heitz` and its table: `tabulated/tests.rs`).
 
 #![allow(clippy::needless_range_loop)] // channel loops over parallel arrays read best indexed
 
 use super::fast_msx::FastMsx;
 use super::kulla_conty::KullaConty;
 use super::single::SingleBounce;
+use super::tabulated::Tabulated;
 use super::testing::*;
 use super::turquin::Turquin;
 use super::Brdf;
@@ -104,10 +106,11 @@ fn turquin_conserves_white_energy_toward_a_fixed_view() {
 fn compensation_models_sample_what_they_evaluate() {
     for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
         let s = single(ndf, 0.6, COPPER, Height::Correlated);
-        let models: [Box<dyn Brdf>; 3] = [
+        let models: [Box<dyn Brdf>; 4] = [
             Box::new(FastMsx { single: s }),
             Box::new(KullaConty::new(s)),
             Box::new(Turquin::new(s)),
+            Box::new(Tabulated::new(s)),
         ];
         for (k, m) in models.iter().enumerate() {
             for theta in [35.0, 70.0] {
@@ -121,7 +124,7 @@ fn compensation_models_sample_what_they_evaluate() {
 
 #[test]
 fn compensation_models_survive_the_finite_sweep() {
-    for which in 0..3 {
+    for which in 0..4 {
         assert_finite_sweep(
             |rng| {
                 let (microfacet, fresnel) = random_surface(rng);
@@ -133,7 +136,8 @@ fn compensation_models_survive_the_finite_sweep() {
                 match which {
                     0 => Box::new(FastMsx { single: s }) as Box<dyn Brdf>,
                     1 => Box::new(KullaConty::new(s)),
-                    _ => Box::new(Turquin::new(s)),
+                    2 => Box::new(Turquin::new(s)),
+                    _ => Box::new(Tabulated::new(s)),
                 }
             },
             1_000_000,

@@ -174,6 +174,23 @@ struct FirstVertex {
     area_out: f64,
 }
 
+/// A direction next-event estimation connects to, with its `Lambda` (computed once per walk).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Target {
+    w: Vec3<f64>,
+    lambda: f64,
+}
+
+impl Target {
+    /// `w` must be strictly above the surface.
+    pub(crate) fn new(mf: &Microfacet<f64>, w: Vec3<f64>) -> Target {
+        Target {
+            w,
+            lambda: mf.z_lambda(w) / w.z,
+        }
+    }
+}
+
 /// How a walk weights its next-event contributions of order >= 2 against the walk from the
 /// other direction.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -268,19 +285,40 @@ impl Heitz {
         a: Vec3<f64>,
         b: Vec3<f64>,
         rng: &mut Rng,
-        first: u32,
-        last: u32,
+        orders: (u32, u32),
         weighting: Weighting,
     ) -> [f64; 3] {
+        let mut sum = [0.0; 3];
+        let target = [Target::new(&self.microfacet, b)];
+        self.nee_walk_each(a, &target, rng, orders, weighting, |_, _, value| {
+            for c in 0..3 {
+                sum[c] += value[c];
+            }
+        });
+        sum
+    }
+
+    /// [`Heitz::nee_walk`] toward every direction of `targets` at once along one walk from `a`
+    /// (the walk does not depend on the target, only the connections do): `sink(target index,
+    /// order, contribution)` receives each next-event contribution of order `orders.0..=orders.1`
+    /// separately, in 1/sr. `tabulated` builds its table this way, one walk serving a whole
+    /// row of outgoing directions and every order.
+    pub(crate) fn nee_walk_each(
+        &self,
+        a: Vec3<f64>,
+        targets: &[Target],
+        rng: &mut Rng,
+        (first, last): (u32, u32),
+        weighting: Weighting,
+        mut sink: impl FnMut(usize, u32, [f64; 3]),
+    ) {
         let mf = &self.microfacet;
         let z_lambda_a = mf.z_lambda(a);
         let lambda_a = z_lambda_a / a.z;
-        let lambda_b = mf.z_lambda(b) / b.z;
         let mut flight = Flight {
             w: -a,
             z_lambda: z_lambda_a,
         };
-        let mut sum = [0.0; 3];
         let mut throughput = [1.0; 3];
         let mut first_vertex = FirstVertex::default();
         // The ray comes from above the surface (t = 0) and flies down: it always hits.
@@ -290,34 +328,47 @@ impl Heitz {
             let wi_l = -flight.w;
             let area_in = flight.area_facing();
             if order >= first && area_in > 0.0 {
-                let half = wi_l + b;
-                let len2 = half.length_squared();
-                if len2 > 1e-300 {
+                for (
+                    index,
+                    &Target {
+                        w: b,
+                        lambda: lambda_b,
+                    },
+                ) in targets.iter().enumerate()
+                {
+                    let half = wi_l + b;
+                    let len2 = half.length_squared();
+                    if len2 <= 1e-300 {
+                        continue;
+                    }
                     let h = half * len2.sqrt().recip();
                     let d = mf.d(h);
-                    if d > 0.0 {
-                        let shadowing = (-lambda_b * t).exp();
-                        let mut scale = d * shadowing / (4.0 * area_in * b.z);
-                        if order >= 2 {
-                            let (mine, other) = match weighting {
-                                #[cfg(test)]
-                                Weighting::Alone => (1.0, 0.0),
-                                Weighting::Balance => (
-                                    area_in * first_vertex.d * b.z * first_vertex.shadowing,
-                                    first_vertex.area_out * d * a.z * shadowing,
-                                ),
-                                #[cfg(test)]
-                                Weighting::Paper => (first_vertex.d, d),
-                            };
-                            let total = mine + other;
-                            scale *= if total > 0.0 { mine / total } else { 0.0 };
-                        }
-                        if scale > 0.0 {
-                            let fr = self.fresnel.eval(wi_l.dot(h)).0;
-                            for c in 0..3 {
-                                sum[c] += throughput[c] * fr[c] * scale;
-                            }
-                        }
+                    if d <= 0.0 {
+                        continue;
+                    }
+                    let shadowing = (-lambda_b * t).exp();
+                    let mut scale = d * shadowing / (4.0 * area_in * b.z);
+                    if order >= 2 {
+                        let (mine, other) = match weighting {
+                            #[cfg(test)]
+                            Weighting::Alone => (1.0, 0.0),
+                            Weighting::Balance => (
+                                area_in * first_vertex.d * b.z * first_vertex.shadowing,
+                                first_vertex.area_out * d * a.z * shadowing,
+                            ),
+                            #[cfg(test)]
+                            Weighting::Paper => (first_vertex.d, d),
+                        };
+                        let total = mine + other;
+                        scale *= if total > 0.0 { mine / total } else { 0.0 };
+                    }
+                    if scale > 0.0 {
+                        let fr = self.fresnel.eval(wi_l.dot(h)).0;
+                        sink(
+                            index,
+                            order,
+                            [0, 1, 2].map(|c| throughput[c] * fr[c] * scale),
+                        );
                     }
                 }
             }
@@ -345,7 +396,6 @@ impl Heitz {
             }
             order += 1;
         }
-        sum
     }
 
     /// The random walk from `wi`: the escaping direction, the product of the Fresnel terms and
@@ -399,8 +449,8 @@ impl Brdf for Heitz {
         }
         let single = SingleBounce::eval(&self.single(), wi, wo).0;
         let last = self.cap.limit(u32::MAX);
-        let forward = self.nee_walk(wi, wo, rng, 2, last, Weighting::Balance);
-        let backward = self.nee_walk(wo, wi, rng, 2, last, Weighting::Balance);
+        let forward = self.nee_walk(wi, wo, rng, (2, last), Weighting::Balance);
+        let backward = self.nee_walk(wo, wi, rng, (2, last), Weighting::Balance);
         BrdfValue {
             single,
             multi: [0, 1, 2].map(|c| forward[c] + backward[c]),
@@ -621,7 +671,7 @@ mod tests {
             let (wi, wo) = (unit(ti, pi), unit(to, po));
             let exact = SingleBounce::eval(&m.single(), wi, wo).0;
             let walk = mean_of(200_000, k as u64, |rng| {
-                m.nee_walk(wi, wo, rng, 1, 1, Weighting::Alone)
+                m.nee_walk(wi, wo, rng, (1, 1), Weighting::Alone)
             });
             let exact = Estimate {
                 value: exact,
@@ -663,15 +713,15 @@ mod tests {
                 let n = 100_000;
                 let seed = 10 * k as u64;
                 let forward = mean_of(n, seed, |rng| {
-                    m.nee_walk(wi, wo, rng, 2, u32::MAX, Weighting::Alone)
+                    m.nee_walk(wi, wo, rng, (2, u32::MAX), Weighting::Alone)
                 });
                 let backward = mean_of(n, seed + 1, |rng| {
-                    m.nee_walk(wo, wi, rng, 2, u32::MAX, Weighting::Alone)
+                    m.nee_walk(wo, wi, rng, (2, u32::MAX), Weighting::Alone)
                 });
                 let both = |w: Weighting, seed| {
                     mean_of(n, seed, |rng| {
-                        let f = m.nee_walk(wi, wo, rng, 2, u32::MAX, w);
-                        let b = m.nee_walk(wo, wi, rng, 2, u32::MAX, w);
+                        let f = m.nee_walk(wi, wo, rng, (2, u32::MAX), w);
+                        let b = m.nee_walk(wo, wi, rng, (2, u32::MAX), w);
                         [0, 1, 2].map(|c| f[c] + b[c])
                     })
                 };

@@ -17,6 +17,7 @@ use super::albedo_table::AlbedoTable;
 use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
 use super::{Rng, ScalarBrdf};
+use crate::microfacet::Fresnel;
 use crate::scalar::{Real, Rgb, Vec3};
 
 /// 8-point Gauss-Legendre nodes and weights on [0, 1] (for `F_avg`).
@@ -30,6 +31,16 @@ const GAUSS_LEGENDRE_8: [(f64, f64); 8] = [
     (0.898_333_238_706_813_4, 0.111_190_517_226_687_24),
     (0.980_144_928_248_768_1, 0.050_614_268_145_188_13),
 ];
+
+/// `F_avg = 2 integral_0^1 F(mu) mu dmu` per channel (Kulla & Conty 2017), by 8-point
+/// Gauss-Legendre quadrature; shared by `kulla-conty` and `tabulated`.
+pub(crate) fn fresnel_average<T: Real>(fresnel: &Fresnel<T>) -> Rgb<T> {
+    let mut f_avg = Rgb::splat(T::zero());
+    for (x, w) in GAUSS_LEGENDRE_8 {
+        f_avg = f_avg + fresnel.eval(T::c(x)).scale(T::c(2.0 * w * x));
+    }
+    f_avg
+}
 
 #[derive(Clone, Copy)]
 pub struct KullaConty<T> {
@@ -45,10 +56,7 @@ impl<T: Real> KullaConty<T> {
         let table = AlbedoTable::get(single.microfacet.ndf, single.height);
         let alpha = (single.microfacet.ax * single.microfacet.ay).sqrt();
         let e_avg = table.e_avg(alpha);
-        let mut f_avg = Rgb::splat(T::zero());
-        for (x, w) in GAUSS_LEGENDRE_8 {
-            f_avg = f_avg + single.fresnel.eval(T::c(x)).scale(T::c(2.0 * w * x));
-        }
+        let f_avg = fresnel_average(&single.fresnel);
         let lost = (T::one() - e_avg).max_c(0.0);
         let lobe_scale = if lost.re64() < 1e-9 {
             Rgb::splat(T::zero())

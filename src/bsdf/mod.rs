@@ -11,6 +11,7 @@
 //! | `fast-msx` | [`fast_msx`] | analytic second bounce, Rosales et al. 2023; not energy conserving, not reciprocal |
 //! | `kulla-conty` | [`kulla_conty`] | tabulated energy compensation lobe, Kulla & Conty 2017; reciprocal |
 //! | `turquin` | [`turquin`] | tabulated scaling of the single lobe, Turquin 2019; not reciprocal |
+//! | `tabulated` | [`tabulated`] | `heitz`'s multiple-bounce lobe tabulated by order (Heitz et al. 2016), Fresnel per order by Kulla & Conty's `F_avg`; reciprocal |
 //! | `bitterli` | [`bitterli`] | stochastic, position-free, unbiased; Bitterli & d'Eon 2022 |
 //! | `cui` | [`cui`] | stochastic, position-free, unbiased; Cui et al. 2023 |
 //! | `heitz` | [`heitz`] | stochastic random walk with explicit heights, Heitz et al. 2016 (the reference) |
@@ -33,6 +34,7 @@ mod properties;
 mod published_quirks;
 pub mod roulette;
 pub mod single;
+pub mod tabulated;
 #[cfg(test)]
 pub(crate) mod testing;
 #[cfg(test)]
@@ -194,6 +196,7 @@ pub fn differentiable<T: Real>(
         Model::FastMsx => Box::new(fast_msx::FastMsx { single }),
         Model::KullaConty => Box::new(kulla_conty::KullaConty::new(single)),
         Model::Turquin => Box::new(turquin::Turquin::new(single)),
+        Model::Tabulated => Box::new(tabulated::Tabulated::new(single)),
         Model::Bitterli => Box::new(bitterli::Bitterli::new(mf, fresnel).with_bounce_cap(cap)),
         Model::Cui => Box::new(cui::Cui::new(mf, fresnel).with_bounce_cap(cap)),
         Model::WangPt => Box::new(wang(wang::WangEstimator::PathTracing)),
@@ -214,6 +217,8 @@ pub enum Model {
     KullaConty,
     /// Turquin 2019: single scaled by a tabulated compensation factor.
     Turquin,
+    /// Heitz et al. 2016's multiple-bounce lobe, tabulated once by order: deterministic.
+    Tabulated,
     /// Bitterli & d'Eon 2022: position-free, hyperexponential heights, unbiased.
     Bitterli,
     /// Cui et al. 2023: position-free, segment term by dynamic programming, unbiased.
@@ -228,7 +233,7 @@ pub enum Model {
 }
 
 impl Model {
-    pub const ALL: [Model; 9] = [
+    pub const ALL: [Model; 10] = [
         Model::Single,
         Model::Heitz,
         Model::Bitterli,
@@ -238,6 +243,7 @@ impl Model {
         Model::FastMsx,
         Model::KullaConty,
         Model::Turquin,
+        Model::Tabulated,
     ];
 
     pub fn name(self) -> &'static str {
@@ -246,6 +252,7 @@ impl Model {
             Model::FastMsx => "fast-msx",
             Model::KullaConty => "kulla-conty",
             Model::Turquin => "turquin",
+            Model::Tabulated => "tabulated",
             Model::Bitterli => "bitterli",
             Model::Cui => "cui",
             Model::Heitz => "heitz",

@@ -145,6 +145,11 @@ fn kulla_conty_exact_gradient_matches_finite_differences() {
 }
 
 #[test]
+fn tabulated_exact_gradient_matches_finite_differences() {
+    check_model(Model::Tabulated);
+}
+
+#[test]
 fn turquin_exact_gradient_matches_finite_differences() {
     check_model(Model::Turquin);
 }
