@@ -26,7 +26,8 @@
 //! predicted with that texel's parameters at every sub-sample; texels no pixel sees take the
 //! coordinates of the nearest seen texel.
 //!
-//! Models: the analytic ones (`single`, `fast-msx`, `kulla-conty`, `turquin`). The stochastic
+//! Models: the analytic ones (`single`, `fast-msx`, `kulla-conty`, `turquin`, and `tabulated`,
+//! which carries the reference lobe of `heitz`). The stochastic
 //! estimators would give each texel a noisy objective from a few dozen records and cost
 //! thousands of walks per texel per iteration; they are refused with that reason.
 
@@ -542,7 +543,7 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
             "--models",
             format!(
                 "{} is stochastic: a maps fit would give each texel a noisy objective from a \
-                 few dozen records; maps fits take single, fast-msx, kulla-conty or turquin",
+                 few dozen records; maps fits take single, fast-msx, kulla-conty, turquin or tabulated",
                 options.model
             ),
         ));
