@@ -118,7 +118,11 @@ fn load(path: &str) -> Material {
 /// Export `input` (a repository path or an absolute path) and return the written text.
 fn export(input: &Path, format: &str) -> String {
     let dir = tempfile::tempdir().unwrap();
-    let output = dir.path().join("out");
+    export_to(input, format, &dir.path().join("out"))
+}
+
+/// Export `input` to `output` and return the written text.
+fn export_to(input: &Path, format: &str, output: &Path) -> String {
     run_ok(&[
         "export",
         input.to_str().unwrap(),
@@ -127,7 +131,7 @@ fn export(input: &Path, format: &str) -> String {
         "-o",
         output.to_str().unwrap(),
     ]);
-    std::fs::read_to_string(&output).unwrap()
+    std::fs::read_to_string(output).unwrap()
 }
 
 fn export_fit(fit: &str, format: &str) -> String {
@@ -312,10 +316,8 @@ fn mitsuba_diffuse_is_an_exact_sum_through_blendbsdf() {
     assert_eq!(mitsuba_parameter(bsdf, "distribution"), Some("beckmann"));
     assert_eq!(mitsuba_parameter(bsdf, "alpha_u"), Some("0.2"));
     assert_eq!(mitsuba_parameter(bsdf, "alpha_v"), Some("0.45"));
-    assert_eq!(
-        rgb(mitsuba_parameter(bsdf, "specular_reflectance").unwrap()),
-        [2.0; 3]
-    );
+    // A float: Mitsuba 3 refuses an `rgb` reflectance above 1.
+    assert_eq!(mitsuba_parameter(bsdf, "specular_reflectance"), Some("2.0"));
     let diffuse = blend
         .children()
         .find(|n| n.attribute("type") == Some("diffuse"))
@@ -834,4 +836,268 @@ fn scene_export_needs_the_mitsuba_format_and_writes_nothing_otherwise() {
         0,
         "nothing written"
     );
+}
+
+/// A 4 x 2 maps material in a temporary folder: the left half a copper-like metal (alpha 0.25),
+/// the right half a dielectric with a tinted F0 (alpha 0.49), the texel (3, 1) tilted; written
+/// by the library ([`MaterialMaps::save`]), so in the encodings `bouncefit` reads.
+fn maps_file() -> (tempfile::TempDir, PathBuf) {
+    use bouncefit::maps::{MaterialMaps, TexelGrid};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tile.json");
+    let metal = |t: usize| t % 4 < 2;
+    let each = |f: &dyn Fn(usize) -> [f64; 3]| Some((0..8).map(f).collect::<Vec<_>>());
+    let mut normal = vec![[0.0, 0.0, 1.0]; 8];
+    normal[7] = [0.6, 0.0, 0.8];
+    let maps = MaterialMaps {
+        base: load(SCHLICK_FIT),
+        grid: TexelGrid {
+            width: 4,
+            height: 2,
+        },
+        diffuse: each(&|t| if metal(t) { [0.0; 3] } else { [0.5, 0.3, 0.1] }),
+        specular: each(&|t| {
+            if metal(t) {
+                [0.95, 0.64, 0.54]
+            } else {
+                [0.04, 0.03, 0.02]
+            }
+        }),
+        roughness: Some((0..8).map(|t| if metal(t) { 0.25 } else { 0.49 }).collect()),
+        normal: Some(normal),
+    };
+    maps.save(&path, Default::default()).unwrap();
+    (dir, path)
+}
+
+/// Exports the maps of [`maps_file`] to `format` into the same folder; returns the file's
+/// text and the textures folder's entries.
+fn export_maps(input: &Path, format: &str, name: &str) -> (String, Vec<String>) {
+    let output = input.with_file_name(name);
+    (
+        export_to(input, format, &output),
+        folder_entries(&output.with_extension("textures")),
+    )
+}
+
+/// The 8-bit or 16-bit RGB texels of a PNG, scaled to [0, 1].
+fn png_texels(path: &Path) -> Vec<[f64; 3]> {
+    let image = image::open(path).unwrap().into_rgb32f();
+    image.pixels().map(|p| p.0.map(f64::from)).collect()
+}
+
+#[test]
+fn gltf_maps_export_writes_textures_a_quad_and_the_metallic_workflow_per_texel() {
+    let (dir, input) = maps_file();
+    let (text, textures) = export_maps(&input, "gltf", "tile.gltf");
+    assert_eq!(
+        textures,
+        [
+            "base_color.png",
+            "metallic_roughness.png",
+            "normal.png",
+            "specular_color.png"
+        ]
+    );
+    let gltf = gltf::Gltf::from_slice(text.as_bytes()).expect("the glTF crate parses it");
+    let document: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let material = &document["materials"][0];
+    let uri = |texture: &serde_json::Value| {
+        let image = &document["textures"][texture["index"].as_u64().unwrap() as usize]["source"];
+        document["images"][image.as_u64().unwrap() as usize]["uri"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    };
+    let pbr = &material["pbrMetallicRoughness"];
+    assert_eq!(
+        uri(&pbr["baseColorTexture"]),
+        "tile.textures/base_color.png"
+    );
+    assert_eq!(
+        uri(&pbr["metallicRoughnessTexture"]),
+        "tile.textures/metallic_roughness.png"
+    );
+    assert_eq!(uri(&material["normalTexture"]), "tile.textures/normal.png");
+    let specular = &material["extensions"]["KHR_materials_specular"];
+    assert_eq!(
+        uri(&specular["specularColorTexture"]),
+        "tile.textures/specular_color.png"
+    );
+    // The shared index gives the strongest dielectric F0, 0.04.
+    let ior = material["extensions"]["KHR_materials_ior"]["ior"]
+        .as_f64()
+        .unwrap();
+    // (to the 16-bit precision of the specular map)
+    assert!((((ior - 1.0) / (ior + 1.0)).powi(2) - 0.04).abs() < 1e-5);
+    let sampler = &document["samplers"][0];
+    assert_eq!(sampler["magFilter"], 9728);
+    assert_eq!(sampler["minFilter"], 9728);
+    assert_eq!(gltf.meshes().count(), 1);
+    let notes = material["extras"]["bouncefit"]["notes"].to_string();
+    assert!(
+        notes.contains("4 metal") && notes.contains("4 dielectric"),
+        "{notes}"
+    );
+
+    let folder = dir.path().join("tile.textures");
+    let srgb8 = |v: f64| (bouncefit::capture::image_io::linear_to_srgb(v) * 255.0).round() / 255.0;
+    let base = png_texels(&folder.join("base_color.png"));
+    let packed = png_texels(&folder.join("metallic_roughness.png"));
+    let tint = png_texels(&folder.join("specular_color.png"));
+    let normal = png_texels(&folder.join("normal.png"));
+    for t in 0..8 {
+        let metal = t % 4 < 2;
+        let expected = if metal {
+            [0.95, 0.64, 0.54]
+        } else {
+            [0.5, 0.3, 0.1]
+        };
+        for c in 0..3 {
+            assert!((base[t][c] - srgb8(expected[c])).abs() < 1e-6, "texel {t}");
+        }
+        let (roughness, metallic) = if metal { (0.5, 1.0) } else { (0.7, 0.0) };
+        assert!((packed[t][1] - roughness).abs() < 1e-4, "{:?}", packed[t]);
+        assert_eq!(packed[t][2], metallic);
+        let tint_expected = if metal { [1.0; 3] } else { [1.0, 0.75, 0.5] };
+        for c in 0..3 {
+            assert!((tint[t][c] - srgb8(tint_expected[c])).abs() < 1e-6);
+        }
+    }
+    // Row 1, column 3 (the -y, +x corner) leans to +x; the others face up.
+    assert!((normal[7][0] - 0.8).abs() < 1e-4 && (normal[0][0] - 0.5).abs() < 1e-4);
+}
+
+#[test]
+fn mitsuba_maps_export_names_bitmaps_the_scene_resolves() {
+    let (dir, input) = maps_file();
+    let (text, textures) = export_maps(&input, "mitsuba", "tile.xml");
+    assert_eq!(
+        textures,
+        ["alpha.exr", "diffuse.exr", "eta.exr", "k.exr", "normal.exr"]
+    );
+    let document = roxmltree::Document::parse(&text).unwrap();
+    let fitted = document
+        .descendants()
+        .find(|n| n.attribute("id") == Some("fitted"))
+        .unwrap();
+    assert_eq!(fitted.attribute("type"), Some("normalmap"));
+    let mut names = Vec::new();
+    for bitmap in document
+        .descendants()
+        .filter(|n| n.attribute("type") == Some("bitmap"))
+    {
+        let file = mitsuba_parameter(bitmap, "filename").unwrap();
+        assert!(dir.path().join(file).is_file(), "{file}");
+        assert_eq!(mitsuba_parameter(bitmap, "filter_type"), Some("nearest"));
+        assert_eq!(mitsuba_parameter(bitmap, "raw"), Some("true"));
+        names.push(bitmap.attribute("name").unwrap());
+    }
+    names.sort();
+    assert_eq!(names, ["alpha", "eta", "k", "normalmap", "reflectance"]);
+    // Each texel's conductor keeps its F0 exactly.
+    let eta = bouncefit::capture::image_io::load_image(
+        &dir.path().join("tile.textures/eta.exr"),
+        bouncefit::capture::ColorEncoding::Linear,
+    )
+    .unwrap();
+    let k = bouncefit::capture::image_io::load_image(
+        &dir.path().join("tile.textures/k.exr"),
+        bouncefit::capture::ColorEncoding::Linear,
+    )
+    .unwrap();
+    for (t, expected) in [(0, 0.95), (3, 0.04)] {
+        let f0 = conductor_f0(f64::from(eta.rgb[t][0]), f64::from(k.rgb[t][0]));
+        assert!((f0 - expected).abs() < 1e-5, "texel {t}: {f0}");
+    }
+}
+
+#[test]
+fn materialx_maps_export_feeds_both_shaders_from_image_nodes() {
+    let (_dir, input) = maps_file();
+    let (text, _) = export_maps(&input, "materialx", "tile.mtlx");
+    let document = roxmltree::Document::parse(&text).unwrap();
+    let images: Vec<(&str, &str)> = document
+        .descendants()
+        .filter(|n| n.has_tag_name("image"))
+        .map(|n| {
+            let file = n
+                .children()
+                .find(|i| i.attribute("name") == Some("file"))
+                .unwrap();
+            (
+                file.attribute("value").unwrap(),
+                file.attribute("colorspace").unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        images,
+        [
+            ("tile.textures/base_color.png", "srgb_texture"),
+            ("tile.textures/metallic_roughness.png", "raw"),
+            ("tile.textures/specular_color.png", "srgb_texture"),
+            ("tile.textures/normal.png", "raw"),
+        ]
+    );
+    for shader in ["standard_surface", "open_pbr_surface"] {
+        let node = document
+            .descendants()
+            .find(|n| n.has_tag_name(shader))
+            .unwrap();
+        let from = |input: &str| {
+            node.children()
+                .find(|i| i.attribute("name") == Some(input))
+                .and_then(|i| i.attribute("nodename"))
+        };
+        assert_eq!(from("base_color"), Some("base_color_image"));
+        assert_eq!(from("specular_roughness"), Some("roughness"));
+    }
+}
+
+#[test]
+fn maps_export_bad_input_exits_2_and_writes_nothing() {
+    let (dir, input) = maps_file();
+    std::fs::remove_file(dir.path().join("tile.maps/normal.png")).unwrap();
+    let before = folder_entries(dir.path());
+    for format in ["gltf", "materialx", "mitsuba"] {
+        let output = dir.path().join("out");
+        let stderr = run_bad(&[
+            "export",
+            input.to_str().unwrap(),
+            "--format",
+            format,
+            "-o",
+            output.to_str().unwrap(),
+        ]);
+        assert!(stderr.contains("normal.png"), "{stderr}");
+        assert_eq!(folder_entries(dir.path()), before, "nothing written");
+    }
+    // Maps have no json export (the material file is that), and an anisotropic uniform alpha
+    // has no texture form.
+    let (dir, input) = maps_file();
+    let mut material = read_json(&input);
+    material["maps"]
+        .as_object_mut()
+        .unwrap()
+        .remove("roughness");
+    material["alpha"] = serde_json::json!([0.2, 0.4]);
+    let anisotropic = dir.path().join("anisotropic.json");
+    std::fs::write(&anisotropic, material.to_string()).unwrap();
+    let before = folder_entries(dir.path());
+    for (input, format, expected) in [
+        (&input, "json", "tile.json: maps"),
+        (&anisotropic, "gltf", "anisotropic.json: alpha"),
+    ] {
+        let stderr = run_bad(&[
+            "export",
+            input.to_str().unwrap(),
+            "--format",
+            format,
+            "-o",
+            dir.path().join("out").to_str().unwrap(),
+        ]);
+        assert!(stderr.contains(expected), "{stderr}");
+        assert_eq!(folder_entries(dir.path()), before, "nothing written");
+    }
 }

@@ -7,18 +7,26 @@
 //! default flash setup; the scene's comment says which and why. The output is written
 //! atomically and replaces an existing file only with `--force`.
 //!
+//! A maps material ([`crate::maps`]) exports to `gltf`, `materialx` and `mitsuba` with its
+//! textures ([`crate::export::maps`]) in the folder `<output without extension>.textures/`
+//! beside the output file, which the file names by relative paths (with `--scene`:
+//! `FOLDER/textures/`, shared by the scenes); `json` refuses it (the maps material file is
+//! already that form).
+//!
 //! `--format mitsuba --scene CAPTURE -o FOLDER` writes the whole capture instead: one complete
 //! scene `<photo stem>.xml` per photo (each photo has its own camera and light, and a Mitsuba
 //! scene lights every sensor with every emitter), so `mitsuba FOLDER/00.xml` re-renders photo
 //! `00` with the fitted material.
 
-use super::inputs::{load_material, open_capture};
+use super::inputs::{load_any_material, open_capture};
 use super::output::{check_output_file, StagedFolder};
 use crate::capture::atomic_file::write_atomically;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
+use crate::export::maps::MapsConversion;
 use crate::export::mitsuba::Scene;
 use crate::export::{gltf, json, materialx, mitsuba, Conversion, ExportFormat};
+use crate::maps::{AnyMaterial, MaterialMaps};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -58,7 +66,10 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
         return export_scenes(args, capture);
     }
     check_output_file(&args.output, args.force)?;
-    let material = load_material(&args.input)?;
+    let material = match load_any_material(&args.input)? {
+        AnyMaterial::Uniform(material) => material,
+        AnyMaterial::Maps(maps) => return export_maps(args, format, &maps),
+    };
     let conversion = Conversion::new(&material);
     let text = match format {
         ExportFormat::Json => json::document(&conversion),
@@ -66,22 +77,73 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
         ExportFormat::Materialx => materialx::document(&conversion),
         ExportFormat::Mitsuba => mitsuba::document(&conversion, &scene_of(&args.input)),
     };
-    write_atomically(&args.output, |w| {
-        w.write_all(text.as_bytes())
-            .map_err(|e| Error::io(&args.output, e))
-    })?;
+    write_text(&args.output, &text)?;
     if format != ExportFormat::Json {
-        if let Some(energy) = conversion.energy() {
-            eprintln!("note: {}", energy.note(material.model));
-        }
+        print_energy_note(&conversion);
     }
     println!("wrote {}", args.output.display());
     Ok(())
 }
 
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    write_atomically(path, |w| {
+        w.write_all(text.as_bytes()).map_err(|e| Error::io(path, e))
+    })
+}
+
+/// A maps material to `format`: the textures into `<output stem>.textures/`, then the file.
+fn export_maps(args: &ExportArgs, format: ExportFormat, maps: &MaterialMaps) -> Result<()> {
+    if format == ExportFormat::Json {
+        return Err(Error::invalid(
+            &args.input,
+            "maps",
+            "--format json exports uniform materials; a maps material file is already its own \
+             JSON form (use gltf, materialx or mitsuba)",
+        ));
+    }
+    let conversion = MapsConversion::new(&args.input, maps)?;
+    let scene = scene_of(&args.input);
+    let textures = args.output.with_extension("textures");
+    let prefix = textures
+        .file_name()
+        .unwrap_or_default()
+        .to_string_lossy()
+        .into_owned();
+    let folder = StagedFolder::new(&textures, args.force)?;
+    let text = match format {
+        ExportFormat::Gltf => {
+            let written = conversion.write_pbr_textures(folder.staging())?;
+            gltf::maps_document(&conversion, &written, &prefix, scene.sample)
+        }
+        ExportFormat::Materialx => {
+            let written = conversion.write_pbr_textures(folder.staging())?;
+            materialx::maps_document(&conversion, &written, &prefix)
+        }
+        ExportFormat::Mitsuba => {
+            let written = conversion.write_mitsuba_textures(folder.staging())?;
+            mitsuba::maps_document(&conversion, &written, &prefix, &scene)
+        }
+        ExportFormat::Json => unreachable!("refused above"),
+    };
+    folder.commit()?;
+    write_text(&args.output, &text)?;
+    print_energy_note(&conversion.roughest);
+    println!("wrote {} and {}", args.output.display(), textures.display());
+    Ok(())
+}
+
+fn print_energy_note(conversion: &Conversion) {
+    if let Some(energy) = conversion.energy() {
+        eprintln!("note: {}", energy.note(conversion.material.model));
+    }
+}
+
+/// The Mitsuba scene of the exported material under a photo's scene.
+type SceneDocument = Box<dyn Fn(&Scene) -> String>;
+
 /// `--scene`: one Mitsuba scene per photo of `capture_path` in the output folder.
 fn export_scenes(args: &ExportArgs, capture_path: &Path) -> Result<()> {
-    let material = load_material(&args.input)?;
+    let material = load_any_material(&args.input)?;
     let capture = open_capture(capture_path)?;
     if capture.photos.is_empty() {
         return Err(Error::invalid(
@@ -90,23 +152,42 @@ fn export_scenes(args: &ExportArgs, capture_path: &Path) -> Result<()> {
             "the capture has no photos",
         ));
     }
-    let conversion = Conversion::new(&material);
     let folder = StagedFolder::new(&args.output, args.force)?;
+    let (document, roughest): (SceneDocument, Conversion) = match &material {
+        AnyMaterial::Uniform(material) => {
+            let conversion = Conversion::new(material);
+            let copy = conversion.clone();
+            (
+                Box::new(move |scene| mitsuba::document(&copy, scene)),
+                conversion,
+            )
+        }
+        AnyMaterial::Maps(maps) => {
+            maps.check_sample(&args.input, &capture.sample)?;
+            let conversion = MapsConversion::new(&args.input, maps)?;
+            let textures = folder.path("textures");
+            std::fs::create_dir(&textures).map_err(|e| Error::io(&textures, e))?;
+            let written = conversion.write_mitsuba_textures(&textures)?;
+            let roughest = conversion.roughest.clone();
+            (
+                Box::new(move |scene| {
+                    mitsuba::maps_document(&conversion, &written, "textures", scene)
+                }),
+                roughest,
+            )
+        }
+    };
     let named = capture_path.display().to_string();
     for (index, photo) in capture.photos.iter().enumerate() {
         let scene = Scene::of_photo(&capture, &named, index)
             .expect("every photo index of the capture has a scene");
-        let path = folder.path(&format!("{}.xml", photo.stem()));
-        let text = mitsuba::document(&conversion, &scene);
-        write_atomically(&path, |w| {
-            w.write_all(text.as_bytes())
-                .map_err(|e| Error::io(&path, e))
-        })?;
+        write_text(
+            &folder.path(&format!("{}.xml", photo.stem())),
+            &document(&scene),
+        )?;
     }
     folder.commit()?;
-    if let Some(energy) = conversion.energy() {
-        eprintln!("note: {}", energy.note(material.model));
-    }
+    print_energy_note(&roughest);
     println!(
         "wrote {} Mitsuba scenes to {}",
         capture.photos.len(),

@@ -64,6 +64,11 @@ impl StagedFolder {
         self.staging.join(name)
     }
 
+    /// The staging folder itself (where files of the destination are written).
+    pub fn staging(&self) -> &Path {
+        &self.staging
+    }
+
     /// Move the complete folder into place.
     pub fn commit(mut self) -> Result<()> {
         if self.destination.exists() {

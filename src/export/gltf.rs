@@ -11,11 +11,28 @@
 //!
 //! The notes also say when the diffuse albedo under a metal is dropped, and (glTF's dielectric
 //! weights the diffuse by `1 - F`) when the diffuse layer is not the fit's plain sum.
+//!
+//! ## Maps
+//!
+//! A maps material ([`maps_document`]) is one material whose factors are 1 and whose textures
+//! ([`super::maps`]) carry the texels: `baseColorTexture`, `metallicRoughnessTexture` (glTF 2.0
+//! section 3.9.2), `normalTexture` (section 3.9.3), and for dielectric texels
+//! `KHR_materials_ior` (one index for the map) with `KHR_materials_specular`'s
+//! `specularColorTexture`. Samplers are NEAREST / CLAMP_TO_EDGE (section 5.26): the fit's
+//! lookup is nearest-texel. A quad mesh of the sample's size (sections 3.7.2, 3.6, one `data:`
+//! buffer) carries `TEXCOORD_0` with glTF's top-left origin (section 3.8.2: v = 0 at the
+//! sample's +y edge, texel row 0), `NORMAL` +z and `TANGENT` +x (w = 1, so the bitangent is +y,
+//! the normal map's green axis). Not carried, and stated in `extras.bouncefit.notes`: multiple
+//! scattering (the roughest texel's share), the diffuse sum (glTF layers it), a diffuse albedo
+//! under a metal texel.
 
+use super::maps::{MapsConversion, PbrTextures};
 use super::{Base, Conversion};
 use crate::material::FresnelSpec;
 use crate::microfacet::Height;
+use base64::{engine::general_purpose::STANDARD as BASE64, Engine};
 use serde_json::{json, Map, Value};
+use std::path::Path;
 
 /// glTF's roughness range is [0, 1].
 fn roughness(alpha: f64) -> f64 {
@@ -51,13 +68,6 @@ fn notes(conversion: &Conversion) -> Vec<String> {
             conversion.f82_tint
         ));
     }
-    notes.extend(conversion.ggx_roughness_notes("glTF"));
-    if material.height == Height::Uncorrelated {
-        notes.push(
-            "glTF's visibility term is the height-correlated Smith G2; the fit used the uncorrelated one"
-                .into(),
-        );
-    }
     if let Base::Dielectric { ior, .. } = conversion.base {
         if ior < 1.0 {
             notes.push(format!(
@@ -65,12 +75,26 @@ fn notes(conversion: &Conversion) -> Vec<String> {
                 super::number(ior)
             ));
         }
+        notes.push(DIFFUSE_LAYER_NOTE.into());
+    }
+    notes.extend(conversion.dropped_diffuse_note());
+    notes.extend(lobe_notes(conversion));
+    notes
+}
+
+/// glTF's dielectric is a layer, not the fit's sum.
+const DIFFUSE_LAYER_NOTE: &str =
+    "glTF weights the diffuse by the specular layer's transmission (1 - F); the fit adds it";
+
+/// The notes on the specular lobe: roughness range, distribution, G2, multi-bounce energy.
+fn lobe_notes(conversion: &Conversion) -> Vec<String> {
+    let mut notes = conversion.ggx_roughness_notes("glTF");
+    if conversion.material.height == Height::Uncorrelated {
         notes.push(
-            "glTF weights the diffuse by the specular layer's transmission (1 - F); the fit adds it"
+            "glTF's visibility term is the height-correlated Smith G2; the fit used the uncorrelated one"
                 .into(),
         );
     }
-    notes.extend(conversion.dropped_diffuse_note());
     notes.extend(conversion.common_notes());
     notes
 }
@@ -98,7 +122,7 @@ pub fn document(conversion: &Conversion) -> String {
     if let Some(anisotropy) = anisotropy {
         extensions.insert("KHR_materials_anisotropy".into(), anisotropy);
     }
-    let mut material = json!({
+    let material = json!({
         "name": format!("bouncefit {} fit", conversion.material.model.name()),
         "pbrMetallicRoughness": {
             "baseColorFactor": [base_color[0], base_color[1], base_color[2], 1.0],
@@ -110,6 +134,12 @@ pub fn document(conversion: &Conversion) -> String {
             "notes": notes(conversion),
         }},
     });
+    finish(material, extensions, json!({}))
+}
+
+/// The document holding `material` with its `extensions` (listed in `extensionsUsed`) and the
+/// top-level fields of `more` (meshes, textures and the like).
+fn finish(mut material: Value, extensions: Map<String, Value>, more: Value) -> String {
     let used: Vec<String> = extensions.keys().cloned().collect();
     if !extensions.is_empty() {
         material["extensions"] = Value::Object(extensions);
@@ -124,7 +154,155 @@ pub fn document(conversion: &Conversion) -> String {
     if !used.is_empty() {
         document["extensionsUsed"] = json!(used);
     }
+    if let (Value::Object(fields), Value::Object(more)) = (&mut document, more) {
+        fields.extend(more);
+    }
     let mut text = serde_json::to_string_pretty(&document).expect("a JSON value prints");
     text.push('\n');
     text
+}
+
+/// glTF sampler constants (glTF 2.0 section 5.26, "sampler"): NEAREST and CLAMP_TO_EDGE.
+const NEAREST: u32 = 9728;
+const CLAMP_TO_EDGE: u32 = 33071;
+
+/// The glTF document of a maps material: the material with its textures (URIs
+/// `<prefix>/<file>`, see [`super::maps`]) on a quad the sample's size, `sample` = `[width,
+/// height]`, in the plane z = 0 facing +z (module docs, "Maps").
+pub fn maps_document(
+    conversion: &MapsConversion,
+    textures: &PbrTextures,
+    prefix: &str,
+    sample: [f64; 2],
+) -> String {
+    let mut images = Vec::new();
+    let mut texture = |path: &Path| {
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        images.push(json!({"uri": format!("{prefix}/{name}")}));
+        json!({"index": images.len() - 1})
+    };
+    let mut material = json!({
+        "name": format!("bouncefit {} maps", conversion.maps.base.model.name()),
+        "pbrMetallicRoughness": {
+            "baseColorTexture": texture(&textures.base_color),
+            "metallicRoughnessTexture": texture(&textures.metallic_roughness),
+            "metallicFactor": 1.0,
+            "roughnessFactor": 1.0,
+        },
+    });
+    if let Some(normal) = &textures.normal {
+        material["normalTexture"] = texture(normal);
+    }
+    let mut extensions = Map::new();
+    if let Some(ior) = conversion.dielectric_ior {
+        extensions.insert("KHR_materials_ior".into(), json!({ "ior": ior }));
+    }
+    if let Some(specular) = &textures.specular_color {
+        extensions.insert(
+            "KHR_materials_specular".into(),
+            json!({"specularFactor": 1.0, "specularColorTexture": texture(specular)}),
+        );
+    }
+    let mut notes = conversion.notes();
+    notes.push(
+        "the quad's TEXCOORD_0 runs u from 0 at the sample's -x edge to 1 at +x, and v from 0 \
+         at the +y edge (texel row 0) to 1 at -y; its TANGENT is +x, so the normal texture's \
+         green channel points to +y"
+            .into(),
+    );
+    if conversion.dielectric_ior.is_some() {
+        notes.push(DIFFUSE_LAYER_NOTE.into());
+    }
+    notes.extend(lobe_notes(&conversion.roughest));
+    material["extras"] = json!({"bouncefit": {
+        "material": conversion.maps.base,
+        "texels": [conversion.maps.grid.width, conversion.maps.grid.height],
+        "notes": notes,
+    }});
+    let count = images.len();
+    let mut more = quad(sample);
+    more["images"] = json!(images);
+    more["samplers"] = json!([{
+        "magFilter": NEAREST, "minFilter": NEAREST,
+        "wrapS": CLAMP_TO_EDGE, "wrapT": CLAMP_TO_EDGE,
+    }]);
+    more["textures"] = json!((0..count)
+        .map(|i| json!({"sampler": 0, "source": i}))
+        .collect::<Vec<_>>());
+    finish(material, extensions, more)
+}
+
+/// The sample as a two-triangle quad (glTF 2.0 sections 3.7.2 "Meshes", 3.6 "Buffers"): one
+/// buffer in a `data:` URI holding positions, normals, tangents, texture coordinates (f32)
+/// and indices (u16), a node and a scene; the primitive uses material 0.
+fn quad(sample: [f64; 2]) -> Value {
+    let (x, y) = ((sample[0] / 2.0) as f32, (sample[1] / 2.0) as f32);
+    // Counter-clockwise seen from +z (glTF front faces); v = 0 at the +y edge.
+    let corners = [
+        (-x, -y, 0.0, 1.0),
+        (x, -y, 1.0, 1.0),
+        (x, y, 1.0, 0.0),
+        (-x, y, 0.0, 0.0),
+    ];
+    let attributes: [(&str, &str, Vec<f32>); 4] = [
+        (
+            "POSITION",
+            "VEC3",
+            corners.iter().flat_map(|c| [c.0, c.1, 0.0]).collect(),
+        ),
+        (
+            "NORMAL",
+            "VEC3",
+            corners.iter().flat_map(|_| [0.0, 0.0, 1.0]).collect(),
+        ),
+        (
+            "TANGENT",
+            "VEC4",
+            corners.iter().flat_map(|_| [1.0, 0.0, 0.0, 1.0]).collect(),
+        ),
+        (
+            "TEXCOORD_0",
+            "VEC2",
+            corners.iter().flat_map(|c| [c.2, c.3]).collect(),
+        ),
+    ];
+    let mut bytes = Vec::new();
+    let (mut views, mut accessors, mut primitive) = (Vec::new(), Vec::new(), Map::new());
+    for (name, kind, values) in &attributes {
+        let components = values.len() / corners.len();
+        views.push(json!({"buffer": 0, "byteOffset": bytes.len(), "byteLength": 4 * values.len(), "target": 34962}));
+        let mut accessor = json!({"bufferView": views.len() - 1, "componentType": 5126, "count": corners.len(), "type": kind});
+        if *name == "POSITION" {
+            let column = |c: usize| values.iter().skip(c).step_by(components).cloned();
+            accessor["min"] = json!((0..3)
+                .map(|c| column(c).fold(f32::MAX, f32::min))
+                .collect::<Vec<_>>());
+            accessor["max"] = json!((0..3)
+                .map(|c| column(c).fold(f32::MIN, f32::max))
+                .collect::<Vec<_>>());
+        }
+        bytes.extend(values.iter().flat_map(|v| v.to_le_bytes()));
+        accessors.push(accessor);
+        primitive.insert((*name).into(), json!(accessors.len() - 1));
+    }
+    let indices: [u16; 6] = [0, 1, 2, 0, 2, 3];
+    views.push(json!({"buffer": 0, "byteOffset": bytes.len(), "byteLength": 2 * indices.len(), "target": 34963}));
+    bytes.extend(indices.iter().flat_map(|i| i.to_le_bytes()));
+    accessors.push(json!({"bufferView": views.len() - 1, "componentType": 5123, "count": indices.len(), "type": "SCALAR"}));
+    json!({
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"name": "sample", "mesh": 0}],
+        "meshes": [{"name": "sample", "primitives": [{
+            "attributes": primitive,
+            "indices": accessors.len() - 1,
+            "material": 0,
+        }]}],
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [{
+            "byteLength": bytes.len(),
+            "uri": format!("data:application/octet-stream;base64,{}", BASE64.encode(&bytes)),
+        }],
+    })
 }

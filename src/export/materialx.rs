@@ -12,29 +12,47 @@
 //!
 //! Both shading models are single-bounce GGX with their own energy handling; the document's
 //! comments state what differs from the fit (model, distribution, diffuse layer).
+//!
+//! ## Maps
+//!
+//! A maps material ([`maps_document`]) reads the glTF export's textures ([`super::maps`])
+//! through `image` nodes (MaterialX 1.39 Standard Nodes: `file` with `colorspace`
+//! `srgb_texture` for colour, `raw` for data; `filtertype` "closest", the fit's nearest-texel
+//! lookup), `extract` nodes taking roughness (index 1) and metalness (index 2) from the packed
+//! texture, and a `normalmap` node (tangent space) into `normal` / `geometry_normal`. MaterialX
+//! puts an image's lower left at texture coordinate (0, 0), so the geometry's v must run from
+//! the sample's -y edge to +y (stated in the comments). Metal texels have `specular_color` 1:
+//! exact Schlick for `open_pbr_surface`, Gulbrandsen's edge tint 1 (not Schlick's curve) for
+//! `standard_surface`; multiple scattering is not carried.
 
+use super::maps::{MapsConversion, PbrTextures};
 use super::{number, triple, xml_comment, Base, Conversion};
+use crate::bsdf::Model;
 use crate::material::FresnelSpec;
 use crate::microfacet::fresnel::ior_from_reflectivity_edge_tint;
+use std::path::Path;
 
 /// Standard Surface clamps its anisotropy to this (`mx_roughness_anisotropy`).
 const STANDARD_SURFACE_MAX_ANISOTROPY: f64 = 0.98;
 
 /// A typed input value of a MaterialX node.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 enum Input {
     Float(f64),
     Color3([f64; 3]),
+    /// The output of the node named `.1`, of type `.0`.
+    Node(&'static str, String),
 }
 
 fn inputs_xml(node: &str, name: &str, inputs: &[(&str, Input)]) -> String {
     let mut xml = format!("  <{node} name=\"{name}\" type=\"surfaceshader\">\n");
     for (input, value) in inputs {
-        let (kind, text) = match *value {
-            Input::Float(x) => ("float", number(x)),
-            Input::Color3(c) => ("color3", triple(c)),
+        let (kind, attribute, text) = match value {
+            Input::Float(x) => ("float", "value", number(*x)),
+            Input::Color3(c) => ("color3", "value", triple(*c)),
+            Input::Node(kind, node) => (*kind, "nodename", node.clone()),
         };
-        xml += &format!("    <input name=\"{input}\" type=\"{kind}\" value=\"{text}\" />\n");
+        xml += &format!("    <input name=\"{input}\" type=\"{kind}\" {attribute}=\"{text}\" />\n");
     }
     xml + &format!("  </{node}>\n")
 }
@@ -87,16 +105,24 @@ fn shader_inputs(
     inputs
 }
 
+const STANDARD_SURFACE_NAMES: ShaderNames = ShaderNames {
+    base_weight: "base",
+    metalness: "metalness",
+    specular_weight: "specular",
+    ior: "specular_IOR",
+};
+
+const OPEN_PBR_NAMES: ShaderNames = ShaderNames {
+    base_weight: "base_weight",
+    metalness: "base_metalness",
+    specular_weight: "specular_weight",
+    ior: "specular_ior",
+};
+
 fn standard_surface(conversion: &Conversion) -> Vec<(&'static str, Input)> {
-    let names = ShaderNames {
-        base_weight: "base",
-        metalness: "metalness",
-        specular_weight: "specular",
-        ior: "specular_IOR",
-    };
     shader_inputs(
         conversion,
-        names,
+        STANDARD_SURFACE_NAMES,
         conversion.edge_tint,
         |high, low, along_y| {
             vec![
@@ -115,24 +141,23 @@ fn standard_surface(conversion: &Conversion) -> Vec<(&'static str, Input)> {
 }
 
 fn open_pbr_surface(conversion: &Conversion) -> Vec<(&'static str, Input)> {
-    let names = ShaderNames {
-        base_weight: "base_weight",
-        metalness: "base_metalness",
-        specular_weight: "specular_weight",
-        ior: "specular_ior",
-    };
-    shader_inputs(conversion, names, conversion.f82_tint, |high, low, _| {
-        vec![
-            (
-                "specular_roughness",
-                Input::Float(((high * high + low * low) / 2.0).powf(0.25)),
-            ),
-            (
-                "specular_roughness_anisotropy",
-                Input::Float(1.0 - low / high),
-            ),
-        ]
-    })
+    shader_inputs(
+        conversion,
+        OPEN_PBR_NAMES,
+        conversion.f82_tint,
+        |high, low, _| {
+            vec![
+                (
+                    "specular_roughness",
+                    Input::Float(((high * high + low * low) / 2.0).powf(0.25)),
+                ),
+                (
+                    "specular_roughness_anisotropy",
+                    Input::Float(1.0 - low / high),
+                ),
+            ]
+        },
+    )
 }
 
 fn notes(conversion: &Conversion) -> Vec<String> {
@@ -186,7 +211,6 @@ fn notes(conversion: &Conversion) -> Vec<String> {
             );
         }
     }
-    notes.extend(conversion.ggx_roughness_notes("standard_surface and open_pbr_surface"));
     if let Base::Dielectric { .. } = conversion.base {
         notes.push(
             "both shaders layer the diffuse under the specular (weighted by its transmission); \
@@ -195,28 +219,46 @@ fn notes(conversion: &Conversion) -> Vec<String> {
         );
     }
     notes.extend(conversion.dropped_diffuse_note());
+    notes.extend(shared_notes(conversion));
+    notes
+}
+
+/// The notes on the roughness range, distribution and multi-bounce energy.
+fn shared_notes(conversion: &Conversion) -> Vec<String> {
+    let mut notes = conversion.ggx_roughness_notes("standard_surface and open_pbr_surface");
     notes.extend(conversion.common_notes());
     notes
 }
 
 /// The `.mtlx` document for `conversion`.
 pub fn document(conversion: &Conversion) -> String {
+    header(conversion.material.model, &notes(conversion))
+        + &shaders(&standard_surface(conversion), &open_pbr_surface(conversion))
+}
+
+/// The document's opening and its comments, up to the first node.
+fn header(model: Model, notes: &[String]) -> String {
     let mut xml = String::from("<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n");
     xml += &xml_comment(
         "  ",
         &format!(
             "bouncefit {} export of a '{}' fit: the same material as standard_surface and as open_pbr_surface",
             env!("CARGO_PKG_VERSION"),
-            conversion.material.model.name()
+            model.name()
         ),
     );
-    for note in notes(conversion) {
-        xml += &xml_comment("  ", &note);
+    for note in notes {
+        xml += &xml_comment("  ", note);
     }
-    xml += &inputs_xml(
+    xml
+}
+
+/// The two shaders with these inputs, their materials, and the document's end.
+fn shaders(standard_surface: &[(&str, Input)], open_pbr_surface: &[(&str, Input)]) -> String {
+    let mut xml = inputs_xml(
         "standard_surface",
         "SR_bouncefit_standard_surface",
-        &standard_surface(conversion),
+        standard_surface,
     );
     xml += &material_xml(
         "M_bouncefit_standard_surface",
@@ -225,11 +267,142 @@ pub fn document(conversion: &Conversion) -> String {
     xml += &inputs_xml(
         "open_pbr_surface",
         "SR_bouncefit_open_pbr_surface",
-        &open_pbr_surface(conversion),
+        open_pbr_surface,
     );
     xml += &material_xml(
         "M_bouncefit_open_pbr_surface",
         "SR_bouncefit_open_pbr_surface",
     );
     xml + "</materialx>\n"
+}
+
+/// The image, extract and normalmap nodes (MaterialX 1.39 Standard Nodes: `image` with
+/// `filtertype` "closest", `extract`, `normalmap`) reading the textures of
+/// [`MapsConversion::write_pbr_textures`] (files `<prefix>/<name>`), and the inputs they feed,
+/// by meaning: base colour, metalness, roughness, specular colour, normal.
+struct MapNodes {
+    xml: String,
+    base_color: Input,
+    metalness: Input,
+    roughness: Input,
+    specular_color: Input,
+    normal: Option<Input>,
+}
+
+fn map_nodes(textures: &PbrTextures, prefix: &str) -> MapNodes {
+    let mut xml = String::new();
+    let mut image = |node: &str, kind: &'static str, path: &Path, colorspace: &str| {
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        xml += &format!(
+            "  <image name=\"{node}\" type=\"{kind}\">\n    <input name=\"file\" type=\"filename\" value=\"{prefix}/{name}\" colorspace=\"{colorspace}\" />\n    <input name=\"filtertype\" type=\"string\" value=\"closest\" />\n  </image>\n"
+        );
+        Input::Node(kind, node.to_string())
+    };
+    let base_color = image(
+        "base_color_image",
+        "color3",
+        &textures.base_color,
+        "srgb_texture",
+    );
+    let metallic_roughness = image(
+        "metallic_roughness_image",
+        "vector3",
+        &textures.metallic_roughness,
+        "raw",
+    );
+    let specular_color = match &textures.specular_color {
+        Some(path) => image("specular_color_image", "color3", path, "srgb_texture"),
+        None => Input::Color3([1.0; 3]),
+    };
+    let normal_image = textures
+        .normal
+        .as_deref()
+        .map(|path| image("normal_image", "vector3", path, "raw"));
+    let Input::Node(_, packed) = metallic_roughness else {
+        unreachable!("an image is a node")
+    };
+    let mut node = |name: &str, kind: &'static str, inputs: &[(&str, Input)], extra: &str| {
+        xml += &format!(
+            "  <{kind} name=\"{name}\" type=\"{}\">\n",
+            if kind == "normalmap" {
+                "vector3"
+            } else {
+                "float"
+            }
+        );
+        for (input, value) in inputs {
+            let Input::Node(kind, from) = value else {
+                unreachable!("map nodes take node outputs")
+            };
+            xml += &format!("    <input name=\"{input}\" type=\"{kind}\" nodename=\"{from}\" />\n");
+        }
+        xml += extra;
+        xml += &format!("  </{kind}>\n");
+        Input::Node(
+            if kind == "normalmap" {
+                "vector3"
+            } else {
+                "float"
+            },
+            name.to_string(),
+        )
+    };
+    let packed = Input::Node("vector3", packed);
+    let index = |i: u8| format!("    <input name=\"index\" type=\"integer\" value=\"{i}\" />\n");
+    let roughness = node("roughness", "extract", &[("in", packed.clone())], &index(1));
+    let metalness = node("metalness", "extract", &[("in", packed)], &index(2));
+    let normal = normal_image.map(|from| node("normal", "normalmap", &[("in", from)], ""));
+    MapNodes {
+        xml,
+        base_color,
+        metalness,
+        roughness,
+        specular_color,
+        normal,
+    }
+}
+
+/// The `.mtlx` document of a maps material: image nodes (module docs, "Maps") feeding a
+/// `standard_surface` and an `open_pbr_surface`.
+pub fn maps_document(conversion: &MapsConversion, textures: &PbrTextures, prefix: &str) -> String {
+    let nodes = map_nodes(textures, prefix);
+    let shader = |names: ShaderNames, normal: &'static str| {
+        let mut inputs = vec![
+            (names.base_weight, Input::Float(1.0)),
+            ("base_color", nodes.base_color.clone()),
+            (names.metalness, nodes.metalness.clone()),
+            (names.specular_weight, Input::Float(1.0)),
+            ("specular_color", nodes.specular_color.clone()),
+            ("specular_roughness", nodes.roughness.clone()),
+        ];
+        if let Some(ior) = conversion.dielectric_ior {
+            inputs.push((names.ior, Input::Float(ior)));
+        }
+        if let Some(n) = &nodes.normal {
+            inputs.push((normal, n.clone()));
+        }
+        inputs
+    };
+    let mut notes = conversion.notes();
+    notes.push(
+        "the images' row 0 is the sample's +y edge: MaterialX puts an image's lower left at \
+         texture coordinate (0, 0), so the geometry's v must run from 0 at the sample's -y \
+         edge to 1 at +y, u from 0 at -x to 1 at +x"
+            .into(),
+    );
+    if conversion.metal_count() > 0 {
+        notes.push(
+            "metal texels have specular_color 1: open_pbr_surface's F82-tint Fresnel is then \
+             Schlick's exactly; standard_surface's is Gulbrandsen's conductor with edge tint 1, \
+             not the Schlick curve"
+                .into(),
+        );
+    }
+    notes.extend(shared_notes(&conversion.roughest));
+    let mut xml = header(conversion.maps.base.model, &notes);
+    xml += &nodes.xml;
+    xml + &shaders(
+        &shader(STANDARD_SURFACE_NAMES, "normal"),
+        &shader(OPEN_PBR_NAMES, "geometry_normal"),
+    )
 }

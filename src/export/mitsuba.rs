@@ -27,11 +27,31 @@
 //! | directional light | `directional` emitter with `irradiance x exposure` | yes |
 //! | integrator | `direct` (the tool renders direct lighting only) | yes |
 //!
+//! ## Maps
+//!
+//! A maps material ([`maps_document`]) is the same BSDF with `bitmap` textures (Mitsuba 3
+//! plugin reference: `bitmap` with `raw` true and `filter_type` nearest, float EXRs of
+//! [`super::maps`]) for `alpha`, `eta`, `k` and the doubled diffuse reflectance, under the
+//! `normalmap` BSDF when the maps have normals (it evaluates the nested BSDF in the frame of the
+//! texel's normal built from `dp_du` = +x, as [`crate::maps`] does). Every texel, metal or
+//! dielectric, is the fit's sum of a Schlick-F0 GGX lobe and a Lambertian albedo, which the
+//! `blendbsdf` sum gives exactly, so no metal mask or second BSDF is needed; the Schlick curve
+//! becomes each texel's conductor with that F0 ([`super::SchlickTintTable`]), exact at normal
+//! incidence (a co-located flash sees only that), within the stated Fresnel difference elsewhere;
+//! for dielectric F0 (about 0.04) that absolute difference is large relative to F, so under a
+//! light far from the camera dielectric texels render up to about 10% brighter than the fit
+//! (measured in `tests/crosscheck/test_export_maps.py`).
+//! Mitsuba's `rectangle` has `v = 0` at its -y edge and `bitmap` reads image row 0 at `v = 0`,
+//! so each bitmap's `to_uv` flips `v` to put row 0 at +y. Agreement with `bouncefit render`:
+//! `tests/crosscheck/test_export_maps.py`.
+//!
 //! Mitsuba 3's principal point offsets are fractions of the film size: a positive x offset turns
 //! the ray through the film centre to image right, a positive y offset to image down (measured
 //! with `Sensor::sample_ray`, mitsuba 3.9).
 
-use super::{number, triple, xml_comment, Conversion};
+use super::maps::{MapsConversion, MitsubaTextures};
+use super::{number, triple, xml_comment, Conversion, SchlickTintTable};
+use crate::bsdf::Model;
 use crate::capture::{Camera, Capture, Light, Pinhole, Rectified};
 use crate::material::FresnelSpec;
 use crate::microfacet::Height;
@@ -186,9 +206,14 @@ fn xyz_attributes(v: DVec3) -> String {
 
 /// What the scene states about the BSDF, one sentence each.
 fn notes(conversion: &Conversion) -> Vec<String> {
-    let material = &conversion.material;
-    let mut notes = Vec::new();
-    notes.push(match material.fresnel {
+    let mut notes = vec![fresnel_note(conversion)];
+    notes.extend(lobe_notes(conversion, conversion.has_diffuse()));
+    notes
+}
+
+/// Where `eta` and `k` come from.
+fn fresnel_note(conversion: &Conversion) -> String {
+    match conversion.material.fresnel {
         FresnelSpec::Conductor { .. } => "eta and k are the fitted complex index of refraction".to_string(),
         FresnelSpec::Dielectric { eta } => format!(
             "the fitted dielectric Fresnel (eta {}) is the conductor eta + 0i, whose reflectance is the same",
@@ -201,15 +226,20 @@ fn notes(conversion: &Conversion) -> Vec<String> {
             triple(conversion.f0),
             number(conversion.conductor.max_error)
         ),
-    });
-    if material.height == Height::Correlated {
+    }
+}
+
+/// The notes on G2, the diffuse sum (`has_diffuse`) and the multi-bounce energy.
+fn lobe_notes(conversion: &Conversion, has_diffuse: bool) -> Vec<String> {
+    let mut notes = Vec::new();
+    if conversion.material.height == Height::Correlated {
         notes.push(
             "the fit used the height-correlated Smith G2 = 1 / (1 + Lambda(wi) + Lambda(wo)); \
              roughconductor uses the uncorrelated G1(wi) G1(wo), slightly darker at grazing angles"
                 .to_string(),
         );
     }
-    if conversion.has_diffuse() {
+    if has_diffuse {
         notes.push(
             "blendbsdf with weight 0.5 of the roughconductor and the diffuse, both doubled, \
              is the sum f_specular + diffuse / pi of the fit"
@@ -220,56 +250,123 @@ fn notes(conversion: &Conversion) -> Vec<String> {
     notes
 }
 
-fn roughconductor(conversion: &Conversion, indent: &str, id: &str, scale: f64) -> String {
-    let material = &conversion.material;
+/// A BSDF parameter: a constant, or a texture file (Mitsuba 3 `bitmap`).
+enum Param {
+    Float(f64),
+    Rgb([f64; 3]),
+    /// A float EXR of the texel grid, read raw (no colour conversion), nearest texel, with the
+    /// image's row 0 at the sample's +y edge: Mitsuba's `rectangle` has `v = 0` at its -y edge
+    /// and `bitmap` puts the image's row 0 at `v = 0`, so `to_uv` flips `v`.
+    Bitmap(String),
+}
+
+fn param(indent: &str, name: &str, value: &Param) -> String {
+    match value {
+        Param::Float(x) => format!(
+            "{indent}<float name=\"{name}\" value=\"{}\"/>\n",
+            number(*x)
+        ),
+        Param::Rgb(v) => format!("{indent}<rgb name=\"{name}\" value=\"{}\"/>\n", triple(*v)),
+        Param::Bitmap(file) => format!(
+            "{indent}<texture type=\"bitmap\" name=\"{name}\">
+{indent}    <string name=\"filename\" value=\"{file}\"/>
+{indent}    <boolean name=\"raw\" value=\"true\"/>
+{indent}    <string name=\"filter_type\" value=\"nearest\"/>
+{indent}    <transform name=\"to_uv\">
+{indent}        <scale x=\"1\" y=\"-1\"/>
+{indent}        <translate x=\"0\" y=\"1\"/>
+{indent}    </transform>
+{indent}</texture>\n"
+        ),
+    }
+}
+
+/// What the BSDF is built from: the roughconductor's parameters, the diffuse albedo (doubled,
+/// see the module table) and the normal map.
+struct Lobe {
+    distribution: &'static str,
+    alpha: Vec<(&'static str, Param)>,
+    eta: Param,
+    k: Param,
+    doubled_diffuse: Option<Param>,
+    normal: Option<Param>,
+}
+
+impl Lobe {
+    fn uniform(conversion: &Conversion) -> Lobe {
+        let [ax, ay] = conversion.material.alpha;
+        Lobe {
+            distribution: conversion.material.ndf.name(),
+            alpha: if conversion.is_anisotropic() {
+                vec![("alpha_u", Param::Float(ax)), ("alpha_v", Param::Float(ay))]
+            } else {
+                vec![("alpha", Param::Float(ax))]
+            },
+            eta: Param::Rgb(conversion.conductor.eta),
+            k: Param::Rgb(conversion.conductor.k),
+            doubled_diffuse: conversion
+                .has_diffuse()
+                .then(|| Param::Rgb(conversion.material.diffuse.map(|d| 2.0 * d))),
+            normal: None,
+        }
+    }
+
+    fn maps(conversion: &MapsConversion, textures: &MitsubaTextures, prefix: &str) -> Lobe {
+        let file = |path: &std::path::Path| {
+            let name = path.file_name().unwrap_or_default().to_string_lossy();
+            Param::Bitmap(format!("{prefix}/{name}"))
+        };
+        Lobe {
+            distribution: conversion.maps.base.ndf.name(),
+            alpha: vec![("alpha", file(&textures.alpha))],
+            eta: file(&textures.eta),
+            k: file(&textures.k),
+            doubled_diffuse: textures.diffuse.as_deref().map(file),
+            normal: textures.normal.as_deref().map(file),
+        }
+    }
+}
+
+fn roughconductor(lobe: &Lobe, indent: &str, id: &str, scale: f64) -> String {
     let inner = format!("{indent}    ");
     let mut xml = format!("{indent}<bsdf type=\"roughconductor\"{id}>\n");
     xml += &format!(
         "{inner}<string name=\"distribution\" value=\"{}\"/>\n",
-        material.ndf.name()
+        lobe.distribution
     );
-    if conversion.is_anisotropic() {
-        xml += &format!(
-            "{inner}<float name=\"alpha_u\" value=\"{}\"/>\n",
-            number(material.alpha[0])
-        );
-        xml += &format!(
-            "{inner}<float name=\"alpha_v\" value=\"{}\"/>\n",
-            number(material.alpha[1])
-        );
-    } else {
-        xml += &format!(
-            "{inner}<float name=\"alpha\" value=\"{}\"/>\n",
-            number(material.alpha[0])
-        );
+    for (name, value) in &lobe.alpha {
+        xml += &param(&inner, name, value);
     }
-    xml += &format!(
-        "{inner}<rgb name=\"eta\" value=\"{}\"/>\n",
-        triple(conversion.conductor.eta)
-    );
-    xml += &format!(
-        "{inner}<rgb name=\"k\" value=\"{}\"/>\n",
-        triple(conversion.conductor.k)
-    );
+    xml += &param(&inner, "eta", &lobe.eta);
+    xml += &param(&inner, "k", &lobe.k);
     if scale != 1.0 {
-        xml += &format!(
-            "{inner}<rgb name=\"specular_reflectance\" value=\"{}\"/>\n",
-            triple([scale; 3])
-        );
+        xml += &param(&inner, "specular_reflectance", &Param::Float(scale));
     }
     xml + &format!("{indent}</bsdf>\n")
 }
 
-fn bsdf(conversion: &Conversion) -> String {
-    if !conversion.has_diffuse() {
-        return roughconductor(conversion, "    ", " id=\"fitted\"", 1.0);
+/// The roughconductor, summed with the diffuse through `blendbsdf`, under Mitsuba's
+/// `normalmap` BSDF when there is a normal map; the outermost BSDF has the id `fitted`.
+fn bsdf(lobe: &Lobe) -> String {
+    let (indent, id) = match lobe.normal {
+        Some(_) => ("        ", ""),
+        None => ("    ", " id=\"fitted\""),
+    };
+    let inner = match &lobe.doubled_diffuse {
+        None => roughconductor(lobe, indent, id, 1.0),
+        Some(diffuse) => format!(
+            "{indent}<bsdf type=\"blendbsdf\"{id}>\n{indent}    <float name=\"weight\" value=\"0.5\"/>\n{}{indent}    <bsdf type=\"diffuse\">\n{}{indent}    </bsdf>\n{indent}</bsdf>\n",
+            roughconductor(lobe, &format!("{indent}    "), "", 2.0),
+            param(&format!("{indent}        "), "reflectance", diffuse)
+        ),
+    };
+    match &lobe.normal {
+        None => inner,
+        Some(normal) => format!(
+            "    <bsdf type=\"normalmap\" id=\"fitted\">\n{}{inner}    </bsdf>\n",
+            param("        ", "normalmap", normal)
+        ),
     }
-    let doubled = conversion.material.diffuse.map(|d| 2.0 * d);
-    format!(
-        "    <bsdf type=\"blendbsdf\" id=\"fitted\">\n        <float name=\"weight\" value=\"0.5\"/>\n{}        <bsdf type=\"diffuse\">\n            <rgb name=\"reflectance\" value=\"{}\"/>\n        </bsdf>\n    </bsdf>\n",
-        roughconductor(conversion, "        ", "", 2.0),
-        triple(doubled)
-    )
 }
 
 fn sensor(camera: &SceneCamera) -> String {
@@ -333,13 +430,49 @@ fn emitter(scene: &Scene) -> String {
 
 /// The scene XML for `conversion` under `scene`.
 pub fn document(conversion: &Conversion, scene: &Scene) -> String {
+    scene_document(
+        conversion.material.model,
+        notes(conversion),
+        &bsdf(&Lobe::uniform(conversion)),
+        scene,
+    )
+}
+
+/// The scene XML for a maps material under `scene`, its textures named `<prefix>/<file>`
+/// relative to the scene file (module docs, "Maps").
+pub fn maps_document(
+    conversion: &MapsConversion,
+    textures: &MitsubaTextures,
+    prefix: &str,
+    scene: &Scene,
+) -> String {
+    let mut all = conversion.notes();
+    all.push(match conversion.roughest.material.fresnel {
+        FresnelSpec::Schlick { .. } | FresnelSpec::White => format!(
+            "Mitsuba 3 has no Schlick conductor: every texel's eta and k are the conductor with \
+             its F0 whose edge tint follows Schlick's curve (tabulated over F0; largest Fresnel \
+             difference {})",
+            number(SchlickTintTable::get().max_error)
+        ),
+        _ => fresnel_note(&conversion.roughest),
+    });
+    all.extend(lobe_notes(&conversion.roughest, conversion.has_diffuse()));
+    scene_document(
+        conversion.maps.base.model,
+        all,
+        &bsdf(&Lobe::maps(conversion, textures, prefix)),
+        scene,
+    )
+}
+
+fn scene_document(model: Model, notes: Vec<String>, bsdf: &str, scene: &Scene) -> String {
     let mut xml = String::from("<?xml version=\"1.0\" encoding=\"utf-8\"?>\n");
     xml += &xml_comment(
         "",
         &format!(
             "bouncefit {} export of a '{}' fit; render with mitsuba (any RGB variant)",
             env!("CARGO_PKG_VERSION"),
-            conversion.material.model.name()
+            model.name()
         ),
     );
     xml += "<scene version=\"3.0.0\">\n";
@@ -354,10 +487,10 @@ pub fn document(conversion: &Conversion, scene: &Scene) -> String {
             ),
         );
     }
-    for note in scene.notes.iter().cloned().chain(notes(conversion)) {
+    for note in scene.notes.iter().cloned().chain(notes) {
         xml += &xml_comment("    ", &note);
     }
-    xml += &bsdf(conversion);
+    xml += bsdf;
     xml += &format!(
         "    <shape type=\"rectangle\">\n        <transform name=\"to_world\">\n            <scale x=\"{}\" y=\"{}\" z=\"1\"/>\n        </transform>\n        <ref id=\"fitted\"/>\n    </shape>\n",
         number(scene.sample[0] / 2.0),

@@ -8,6 +8,10 @@
 //! | `gltf` | [`gltf`] | a glTF 2.0 document with one metallic-roughness material | conductor Fresnel (by Schlick), multi-bounce energy, diffuse under a metal (dropped) |
 //! | `materialx` | [`materialx`] | a MaterialX 1.39 document with `standard_surface` and `open_pbr_surface` materials | conductor Fresnel (Gulbrandsen / F82-tint), multi-bounce energy, diffuse under a metal |
 //!
+//! A maps material ([`crate::maps`]) exports to `gltf`, `materialx` and `mitsuba` with
+//! textures ([`maps`]: per-texel metallic workflow, the texture files and their encodings):
+//! what each format carries and cannot is in its module docs, section "Maps".
+//!
 //! The facts shared by the formats ([`Conversion`]):
 //!
 //! | fact | rule | source |
@@ -23,6 +27,7 @@
 
 pub mod gltf;
 pub mod json;
+pub mod maps;
 pub mod materialx;
 pub mod mitsuba;
 
@@ -33,6 +38,7 @@ use crate::microfacet::fresnel::{
     conductor, ior_from_reflectivity_edge_tint, reflectivity_edge_tint_from_ior,
 };
 use crate::scalar::Vec3;
+use rayon::prelude::*;
 use std::sync::OnceLock;
 
 /// The output formats of `bouncefit export --format`.
@@ -236,11 +242,13 @@ pub fn xml_comment(indent: &str, text: &str) -> String {
     format!("{indent}<!-- {} -->\n", text.replace("--", "- -"))
 }
 
-fn schlick(f0: f64, cos: f64) -> f64 {
+/// Schlick's Fresnel curve.
+pub fn schlick(f0: f64, cos: f64) -> f64 {
     f0 + (1.0 - f0) * (1.0 - cos).powi(5)
 }
 
-fn base(material: &Material) -> Base {
+/// The metallic-workflow base of `material` (module table, "base kind").
+pub fn base(material: &Material) -> Base {
     match material.fresnel {
         FresnelSpec::Dielectric { eta } => Base::Dielectric {
             ior: eta,
@@ -267,7 +275,7 @@ pub fn ior_from_f0(f0: f64) -> f64 {
     (1.0 + s) / (1.0 - s)
 }
 
-fn equivalent_conductor(fresnel: &FresnelSpec) -> EquivalentConductor {
+pub fn equivalent_conductor(fresnel: &FresnelSpec) -> EquivalentConductor {
     match *fresnel {
         FresnelSpec::Conductor { eta, k } => EquivalentConductor {
             eta,
@@ -288,34 +296,95 @@ fn equivalent_conductor(fresnel: &FresnelSpec) -> EquivalentConductor {
 const FIT_NODES: usize = 256;
 
 /// Per channel, the Gulbrandsen conductor with reflectivity `F0` (capped at
-/// [`MAX_REFLECTIVITY`]) and the edge tint in [0, 1] that minimises the squared difference to
-/// the Schlick curve at [`FIT_NODES`] midpoints of `cos theta` (golden-section search).
+/// [`MAX_REFLECTIVITY`]) and the edge tint [`schlick_edge_tint`].
 fn schlick_conductor(f0: [f64; 3]) -> EquivalentConductor {
     let mut eta = [0.0; 3];
     let mut k = [0.0; 3];
     let mut max_error: f64 = 0.0;
     for c in 0..3 {
-        let r = f0[c].min(MAX_REFLECTIVITY);
-        let distance = |g: f64| {
-            let (e, kk) = ior_from_reflectivity_edge_tint(r, g);
-            (0..FIT_NODES)
-                .map(|i| {
-                    let cos = (i as f64 + 0.5) / FIT_NODES as f64;
-                    (conductor(cos, e, kk) - schlick(f0[c], cos)).powi(2)
-                })
-                .sum::<f64>()
-        };
-        let g = golden_section_minimum(distance, 0.0, 1.0);
-        (eta[c], k[c]) = ior_from_reflectivity_edge_tint(r, g);
-        let worst = (0..=4 * FIT_NODES)
-            .map(|i| {
-                let cos = i as f64 / (4 * FIT_NODES) as f64;
-                (conductor(cos, eta[c], k[c]) - schlick(f0[c], cos)).abs()
-            })
-            .fold(0.0, f64::max);
-        max_error = max_error.max(worst);
+        (eta[c], k[c]) = schlick_conductor_channel(f0[c], schlick_edge_tint(f0[c]));
+        max_error = max_error.max(schlick_curve_error(f0[c], eta[c], k[c]));
     }
     EquivalentConductor { eta, k, max_error }
+}
+
+/// The Gulbrandsen conductor `(eta, k)` with reflectivity `f0` (capped at
+/// [`MAX_REFLECTIVITY`]) and edge tint `g`.
+fn schlick_conductor_channel(f0: f64, g: f64) -> (f64, f64) {
+    ior_from_reflectivity_edge_tint(f0.min(MAX_REFLECTIVITY), g)
+}
+
+/// The edge tint in [0, 1] whose Gulbrandsen conductor with reflectivity `f0` minimises the
+/// squared difference to the Schlick curve at [`FIT_NODES`] midpoints of `cos theta`
+/// (golden-section search).
+fn schlick_edge_tint(f0: f64) -> f64 {
+    let distance = |g: f64| {
+        let (e, kk) = schlick_conductor_channel(f0, g);
+        (0..FIT_NODES)
+            .map(|i| {
+                let cos = (i as f64 + 0.5) / FIT_NODES as f64;
+                (conductor(cos, e, kk) - schlick(f0, cos)).powi(2)
+            })
+            .sum::<f64>()
+    };
+    golden_section_minimum(distance, 0.0, 1.0)
+}
+
+/// Largest `|F_conductor(eta, k) - Schlick(f0)|` over `cos theta` in [0, 1].
+fn schlick_curve_error(f0: f64, eta: f64, k: f64) -> f64 {
+    (0..=4 * FIT_NODES)
+        .map(|i| {
+            let cos = i as f64 / (4 * FIT_NODES) as f64;
+            (conductor(cos, eta, k) - schlick(f0, cos)).abs()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Intervals of the F0 table of [`SchlickTintTable`].
+const TINT_TABLE_INTERVALS: usize = 256;
+
+/// [`schlick_edge_tint`] tabulated over `F0` in [0, 1] and interpolated linearly: the
+/// equivalent conductor of every texel of a map, at the cost of one table.
+pub struct SchlickTintTable {
+    tint: Vec<f64>,
+    /// Largest Schlick-curve difference of the interpolated conductors, at the nodes and the
+    /// midpoints between them (where interpolation is worst).
+    pub max_error: f64,
+}
+
+impl SchlickTintTable {
+    /// The table, built on first use.
+    pub fn get() -> &'static SchlickTintTable {
+        static TABLE: OnceLock<SchlickTintTable> = OnceLock::new();
+        TABLE.get_or_init(|| {
+            let tint: Vec<f64> = (0..=TINT_TABLE_INTERVALS)
+                .into_par_iter()
+                .map(|i| schlick_edge_tint(i as f64 / TINT_TABLE_INTERVALS as f64))
+                .collect();
+            let mut table = SchlickTintTable {
+                tint,
+                max_error: 0.0,
+            };
+            table.max_error = (0..=2 * TINT_TABLE_INTERVALS)
+                .into_par_iter()
+                .map(|i| {
+                    let f0 = i as f64 / (2 * TINT_TABLE_INTERVALS) as f64;
+                    let (eta, k) = table.conductor(f0);
+                    schlick_curve_error(f0, eta, k)
+                })
+                .reduce(|| 0.0, f64::max);
+            table
+        })
+    }
+
+    /// The conductor `(eta, k)` standing in for Schlick's `f0`: reflectivity `f0` exactly, the
+    /// interpolated edge tint.
+    pub fn conductor(&self, f0: f64) -> (f64, f64) {
+        let x = f0.clamp(0.0, 1.0) * TINT_TABLE_INTERVALS as f64;
+        let i = (x.floor() as usize).min(TINT_TABLE_INTERVALS - 1);
+        let t = x - i as f64;
+        schlick_conductor_channel(f0, (1.0 - t) * self.tint[i] + t * self.tint[i + 1])
+    }
 }
 
 /// Minimum of a unimodal function on `[lo, hi]` to about 1e-10 (60 golden-section steps).
@@ -398,6 +467,27 @@ mod tests {
         };
         let g = reflectivity_edge_tint_from_ior(fit.eta[1], fit.k[1]).1;
         assert!(sq(g) < sq(0.0) && sq(g) < sq(1.0));
+    }
+
+    #[test]
+    fn tint_table_keeps_f0_and_follows_the_exact_fit() {
+        let table = SchlickTintTable::get();
+        assert!(table.max_error < 0.02, "{}", table.max_error);
+        for f0 in [0.0123, 0.04, 0.5, 0.913, 1.0] {
+            let (eta, k) = table.conductor(f0);
+            let kept = crate::microfacet::fresnel::conductor_f0(eta, k);
+            assert!(
+                (kept - f0.min(MAX_REFLECTIVITY)).abs() < 1e-12,
+                "{f0}: {kept}"
+            );
+            let exact = schlick_conductor([f0; 3]);
+            let error = schlick_curve_error(f0, eta, k);
+            assert!(
+                error < exact.max_error + 1e-3,
+                "{f0}: {error} vs {}",
+                exact.max_error
+            );
+        }
     }
 
     #[test]

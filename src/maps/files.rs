@@ -335,7 +335,7 @@ impl MaterialMaps {
 }
 
 /// Writes per-texel values as a 16-bit RGB PNG, `encode`d and clamped to [0, 1], atomically.
-fn write_png16(
+pub(crate) fn write_png16(
     path: &Path,
     texels: &[[f64; 3]],
     width: usize,

@@ -1,14 +1,27 @@
 #!/usr/bin/env bash
-# Creates tests/crosscheck/.venv with the pinned packages of requirements.txt (from PyPI).
-# Idempotent: does nothing when the venv already holds exactly these pins.
+# Creates tests/crosscheck/.venv with the pinned packages of requirements.txt (from PyPI), and
+# tests/crosscheck/node/node_modules with the pinned npm packages of node/package-lock.json.
+# Idempotent: does nothing when both already hold exactly these pins.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 venv="$here/.venv"
 stamp="$venv/requirements.installed"
-if [ -f "$stamp" ] && cmp -s "$stamp" "$here/requirements.txt"; then
-    exit 0
+if ! { [ -f "$stamp" ] && cmp -s "$stamp" "$here/requirements.txt"; }; then
+    python3 -m venv "$venv"
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$here/requirements.txt"
+    cp "$here/requirements.txt" "$stamp"
+    echo "crosscheck: installed $(grep -c '==' "$here/requirements.txt") pinned packages into $venv"
 fi
-python3 -m venv "$venv"
-"$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$here/requirements.txt"
-cp "$here/requirements.txt" "$stamp"
-echo "crosscheck: installed $(grep -c '==' "$here/requirements.txt") pinned packages into $venv"
+
+# The Khronos glTF validator (npm gltf-validator, pinned in node/package-lock.json) for
+# test_export_maps.py; Node and npm come from the distribution where missing (root on CI).
+node_dir="$here/node"
+node_stamp="$node_dir/node_modules/package-lock.installed"
+if ! command -v npm >/dev/null; then
+    apt-get update -qq && apt-get install -y -qq nodejs npm >/dev/null
+fi
+if ! { [ -f "$node_stamp" ] && cmp -s "$node_stamp" "$node_dir/package-lock.json"; }; then
+    npm ci --prefix "$node_dir" --no-audit --no-fund --loglevel=error
+    cp "$node_dir/package-lock.json" "$node_stamp"
+    echo "crosscheck: installed gltf-validator into $node_dir/node_modules"
+fi
