@@ -7,7 +7,7 @@ use super::fit::{load_records, residuals, FitArgs, FitOptionArgs};
 use super::images::{display_exposure, write_photo_images};
 use super::output::{check_overwrite, StagedFolder};
 use crate::error::{Error, Result};
-use crate::fit::exposure::exposed_records;
+use crate::fit::point::exposure::exposed_records;
 use crate::fit::fit_model;
 use crate::maps::fit::{fit_maps, relative_error, MapsFit, MapsFitOptions};
 use crate::maps::render::render_maps;

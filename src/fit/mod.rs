@@ -12,22 +12,9 @@
 //! 4. Report: the material, loss, per-photo losses, every start's result, the optimiser trace,
 //!    evaluation counts and timings, in the fit file format of DESIGN.md.
 
+pub mod bayes;
 pub mod cholesky;
-pub mod diagnostics;
-pub mod exposure;
-pub mod holdout;
-pub mod laplace;
-pub mod local;
-pub mod log_posterior;
-pub mod mcmc;
-pub mod objective;
-pub mod params;
-pub mod posterior;
-pub mod projection;
-pub mod sampler;
-pub mod selection;
-pub mod start;
-pub mod uniformity;
+pub mod point;
 
 use crate::bsdf::Model;
 use crate::error::{Error, Result};
@@ -38,14 +25,15 @@ use crate::progress::Progress;
 use crate::render::plan::{PlanSummary, Skips};
 use crate::shading::ShadingRecords;
 use argmin::core::Error as ArgminError;
-use exposure::{exposed_records, ExposureEstimate};
-pub use local::TracePoint;
-use local::{LocalOptimizer, Recorder};
-use objective::{GradientMethod, Objective};
-use params::ParamSpace;
-use projection::Projection;
+use point::exposure::{self, exposed_records, ExposureEstimate};
+pub use point::local::TracePoint;
+use point::local::{self, LocalOptimizer, Recorder};
+use point::objective::{GradientMethod, Objective};
+use point::params::ParamSpace;
+use point::projection::Projection;
+use point::start;
 use serde::{Deserialize, Serialize};
-pub use start::StartMethod;
+pub use point::start::StartMethod;
 use std::borrow::Cow;
 use std::time::Instant;
 

@@ -11,8 +11,8 @@
 //! describes the material better, so held-out error is a ranking that needs no noise model
 //! (Hastie, Tibshirani & Friedman, *Elements of Statistical Learning*, section 7.10).
 
-use super::objective::render_seeds;
-use super::{fit_model, FitOptions};
+use crate::fit::point::objective::render_seeds;
+use crate::fit::{fit_model, FitOptions};
 use crate::error::{Error, Result};
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::material::Material;

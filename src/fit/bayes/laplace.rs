@@ -14,7 +14,7 @@
 //! Standard coordinates: `z = R^T (x - mu)` with `H = R R^T`, so `z ~ N(0, I)` under the
 //! approximation and `x = mu + R^-T z`.
 
-use super::cholesky::Cholesky;
+use crate::fit::cholesky::Cholesky;
 use super::sampler::Target;
 use serde::{Deserialize, Serialize};
 

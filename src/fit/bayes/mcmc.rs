@@ -30,10 +30,10 @@
 
 use super::laplace::Laplace;
 use super::log_posterior::{self, LogPosterior, Noise, Reading};
-use super::params::ParamSpace;
+use crate::fit::point::params::ParamSpace;
 use super::posterior::{summarise, Posterior, RunFacts};
 use super::sampler::{self, Candidate, ChainState, Schedule, Target};
-use super::{fit_model, FitOptions, ModelFit};
+use crate::fit::{fit_model, FitOptions, ModelFit};
 use crate::error::{Error, Result};
 use crate::progress::Progress;
 use crate::shading::ShadingRecords;

@@ -9,8 +9,8 @@
 //! | interval | central 95% of the Laplace approximation ([`Laplace`], MacKay 2003, section 27.1) of the posterior of [`LogPosterior`] at that point, noise level estimated from the fit's loss as the sampler does; `exp(mu +- 1.96 sd)` in `ln s`. `None` for `ssim`, which has no likelihood reading |
 //! | use | predictions of a fitted material (residual images, BIC, held-out error) are rendered on the records with irradiance times `s` ([`exposed_records`]) |
 
-use super::laplace::Laplace;
-use super::log_posterior::{rms_target, LogPosterior, Noise, Reading};
+use crate::fit::bayes::laplace::Laplace;
+use crate::fit::bayes::log_posterior::{rms_target, LogPosterior, Noise, Reading};
 use super::params::ParamSpace;
 use crate::loss::LossKind;
 use crate::shading::ShadingRecords;

@@ -1,0 +1,10 @@
+//! Bayesian inference over the point estimates' parameter spaces.
+
+pub mod diagnostics;
+pub mod holdout;
+pub mod laplace;
+pub mod log_posterior;
+pub mod mcmc;
+pub mod posterior;
+pub mod sampler;
+pub mod selection;
