@@ -759,7 +759,8 @@ fn basis_fits(
         .map(|(c, (centre, &kind))| Basis {
             kind,
             alpha: centre[0].exp(),
-            f0: (specular == 4).then(|| [1, 2, 3].map(|j| crate::fit::point::params::sigmoid(centre[j]))),
+            f0: (specular == 4)
+                .then(|| [1, 2, 3].map(|j| crate::fit::point::params::sigmoid(centre[j]))),
             share: clusters.assignment.iter().filter(|&&a| a == c).count() as f64 / total,
         })
         .collect();

@@ -21,8 +21,8 @@
 
 use super::diagnostics::{bulk_ess, split_rhat};
 use super::log_posterior::Noise;
-use crate::fit::point::params::{FresnelFamily, ParamSpace};
 use super::sampler::{ChainState, Counts, Draw};
+use crate::fit::point::params::{FresnelFamily, ParamSpace};
 use crate::material::FresnelSpec;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
