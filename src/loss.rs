@@ -186,7 +186,7 @@ impl<'a> Loss<'a> {
 
     /// For the losses that are weighted squared errors (`l2`, `relative-l2`): the weights `v`
     /// with `value = sum_pixels sum_c v_c (p_c - t_c)^2`, normalisation included. `None` for the
-    /// others. Variable projection ([`crate::fit::projection`]) solves these in closed form.
+    /// others. Variable projection ([`crate::fit::point::projection`]) solves these in closed form.
     pub fn quadratic_weights(&self) -> Option<Vec<[f64; 3]>> {
         let norm = 1.0 / (3.0 * self.wsum);
         self.quadratic_factor(1.0)?;

@@ -258,7 +258,7 @@ pub fn fit_job(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::params::ParamSpace;
+    use crate::fit::point::params::ParamSpace;
     use crate::fit::Optimizer;
     use crate::loss::LossKind;
 

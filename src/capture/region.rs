@@ -8,7 +8,7 @@
 //!
 //! A photo pixel belongs to the region when the point of the sample its centre sees does;
 //! the others get weight 0. [`SampleRegion::apply`] also returns every pixel's sample point,
-//! for the uniformity check of [`crate::fit::uniformity`].
+//! for the uniformity check of [`crate::fit::point::uniformity`].
 
 use std::path::{Path, PathBuf};
 

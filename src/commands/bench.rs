@@ -20,7 +20,7 @@ use crate::bench::plot::error_against_time;
 use crate::bsdf::Model;
 use crate::capture::atomic_file::write_atomically;
 use crate::error::{Error, Result};
-use crate::fit::params::FresnelFamily;
+use crate::fit::point::params::FresnelFamily;
 use crate::fit::FitOptions;
 use crate::material::Material;
 use crate::progress::Progress;

@@ -8,13 +8,13 @@ use crate::bsdf::Model;
 use crate::capture::region::{AppliedRegion, SampleRegion};
 use crate::capture::Capture;
 use crate::error::{Error, Result};
-use crate::fit::mcmc::{sample_posterior, McmcOptions, PosteriorRun};
-use crate::fit::objective::GradientMethod;
-use crate::fit::params::{FresnelFamily, ParamSpace};
-use crate::fit::posterior::Posterior;
-use crate::fit::sampler::Schedule;
-use crate::fit::selection::{GaussianFit, Selection};
-use crate::fit::uniformity::{self, Uniformity};
+use crate::fit::bayes::mcmc::{sample_posterior, McmcOptions, PosteriorRun};
+use crate::fit::bayes::posterior::Posterior;
+use crate::fit::bayes::sampler::Schedule;
+use crate::fit::bayes::selection::{GaussianFit, Selection};
+use crate::fit::point::objective::GradientMethod;
+use crate::fit::point::params::{FresnelFamily, ParamSpace};
+use crate::fit::point::uniformity::{self, Uniformity};
 use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
 use crate::material::FresnelSpec;
@@ -168,7 +168,7 @@ impl RealCaptureArgs {
 }
 
 /// The `region` entry of a fit file: which part of the sample was fitted and how uniform it
-/// looks under the fit ([`crate::fit::uniformity`]).
+/// looks under the fit ([`crate::fit::point::uniformity`]).
 #[derive(Serialize)]
 pub struct RegionReport {
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -215,7 +215,7 @@ impl RegionReport {
     }
 }
 
-/// `--mcmc` and its options (see `bouncefit::fit::mcmc`).
+/// `--mcmc` and its options (see `bouncefit::fit::bayes::mcmc`).
 #[derive(clap::Args, Debug)]
 pub struct McmcArgs {
     /// Sample the Bayesian posterior over parameters and models; the fit file gains `posterior`.

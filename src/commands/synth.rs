@@ -8,7 +8,7 @@ use crate::albedo::rng_stream;
 use crate::capture::image_io::ColorEncoding;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
-use crate::fit::exposure::exposed_records;
+use crate::fit::point::exposure::exposed_records;
 use crate::maps::render::render_any;
 use crate::maps::AnyMaterial;
 use crate::shading::ShadingRecords;

@@ -1,389 +1,79 @@
-//! Fitting material parameters to a photo set: start, optimise, report.
+//! Fitting material parameters to a photo set, in two rooms.
 //!
-//! 1. Pyramid (`--pyramid n`): fit at 1/2^(n-1) of the resolution first
-//!    ([`ShadingRecords::coarsened`]), each finer level starting from the coarser result.
-//! 2. Start ([`start`]): variable projection over roughness ([`projection`]) where the space and
-//!    loss allow it, else a roughness scan, or a particle swarm (`--optimizer pso`); plus seeded
-//!    random starts (`--starts`).
-//! 3. Local search ([`local`]) over all free coordinates of the [`ParamSpace`] from each start:
-//!    L-BFGS (More-Thuente) or Nelder-Mead, chosen per model by [`Optimizer::local`]; L-BFGS on
-//!    exact dual-number gradients where the model allows, central finite differences otherwise
-//!    or on request ([`objective::GradientMethod`]).
-//! 4. Report: the material, loss, per-photo losses, every start's result, the optimiser trace,
-//!    evaluation counts and timings, in the fit file format of DESIGN.md.
+//! | room | question | modules |
+//! | --- | --- | --- |
+//! | [`point`] | which one material fits the records best? | [`point`] itself (the pipeline: pyramid, starts, local searches, report: [`point::fit_point`], [`FitOptions`], [`ModelFit`]), [`point::objective`] (the loss and its gradients), [`point::params`] (parameter spaces), [`point::projection`] (variable projection), [`point::local`] (L-BFGS, Nelder-Mead), [`point::start`] (global starts), [`point::exposure`] (the exposure value, exposed records), [`point::uniformity`] (does one material explain a region) |
+//! | [`bayes`] | how sure are we, and which model? | [`bayes::log_posterior`] (the loss read as a likelihood, priors, noise level), [`bayes::laplace`] (Laplace approximation and evidence), [`bayes::exposure`] (the exposure's Laplace interval), [`bayes::sampler`] (MALA and between-model jumps), [`bayes::mcmc`] (`--mcmc` runs and checkpoints), [`bayes::posterior`] (posterior summaries), [`bayes::diagnostics`] (R-hat, ESS), [`bayes::selection`] (BIC, held-out rankings), [`bayes::holdout`] (K-fold cross-validation) |
+//! | shared numerics | | [`cholesky`] (used by `bayes` and by `crate::maps`) |
+//!
+//! The rule: calls go from `bayes` into `point`, never from `point` into `bayes` (a test below
+//! reads the sources of `point/` and fails where code outside comments names `bayes`). The Bayesian
+//! room works on what the point room gives it: a [`point::PointFit`] (the fit and its
+//! coordinates) and the [`point::objective::Objective`] its log posterior wraps. This module is
+//! the entry that joins them: [`fit_model`] is the point estimate plus the exposure's interval.
 
+pub mod bayes;
 pub mod cholesky;
-pub mod diagnostics;
-pub mod exposure;
-pub mod holdout;
-pub mod laplace;
-pub mod local;
-pub mod log_posterior;
-pub mod mcmc;
-pub mod objective;
-pub mod params;
-pub mod posterior;
-pub mod projection;
-pub mod sampler;
-pub mod selection;
-pub mod start;
-pub mod uniformity;
+pub mod point;
 
-use crate::bsdf::Model;
-use crate::error::{Error, Result};
-use crate::loss::LossKind;
-use crate::material::{FresnelSpec, Material};
-use crate::microfacet::fresnel::reflectivity_edge_tint_from_ior;
-use crate::progress::Progress;
-use crate::render::plan::{PlanSummary, Skips};
+pub use point::{edge_tint, FitOptions, ModelFit, Optimizer, TracePoint};
+
+use crate::error::Result;
 use crate::shading::ShadingRecords;
-use argmin::core::Error as ArgminError;
-use exposure::{exposed_records, ExposureEstimate};
-pub use local::TracePoint;
-use local::{LocalOptimizer, Recorder};
-use objective::{GradientMethod, Objective};
-use params::ParamSpace;
-use projection::Projection;
-use serde::{Deserialize, Serialize};
-pub use start::StartMethod;
-use std::borrow::Cow;
-use std::time::Instant;
 
-/// The optimiser of a fit (`--optimizer`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum Optimizer {
-    /// Per model: L-BFGS for every model but `heitz`, Nelder-Mead for `heitz`.
-    #[default]
-    Auto,
-    NelderMead,
-    Lbfgs,
-    /// Particle swarm over the whole search box, then L-BFGS.
-    Pso,
-}
-
-impl Optimizer {
-    /// The local optimiser this choice runs for `model`. `heitz` gets Nelder-Mead: its
-    /// explicit-height walks have no pathwise derivative here, and central differences of its
-    /// walks at fixed random numbers step over the jumps where a walk changes its path (on
-    /// `heitz` photos of copper at alpha 0.8, L-BFGS with central differences stopped at
-    /// alpha 0.55 to 0.66 on failed line searches, Nelder-Mead reached 0.76).
-    pub fn local(self, model: Model) -> LocalOptimizer {
-        match (self, model) {
-            (Optimizer::NelderMead, _) | (Optimizer::Auto, Model::Heitz) => {
-                LocalOptimizer::NelderMead
-            }
-            _ => LocalOptimizer::Lbfgs,
-        }
-    }
-}
-
-/// Everything a fit needs besides the photos.
-#[derive(Clone, Debug)]
-pub struct FitOptions {
-    pub space: ParamSpace,
-    pub optimizer: Optimizer,
-    pub loss: LossKind,
-    /// How L-BFGS gets its gradients (exact where the model allows).
-    pub gradient: GradientMethod,
-    pub max_iters: u64,
-    pub seed: u64,
-    /// Show a progress bar (or plain progress lines when stderr is not a terminal).
-    pub progress: bool,
-    /// Local searches from this many starts (the global start plus seeded random ones).
-    pub starts: usize,
-    /// Use variable projection for the start where the space and loss allow it.
-    pub projection: bool,
-    /// Pyramid levels: 1 fits at full resolution only; n fits at 1/2^(n-1) first.
-    pub pyramid: usize,
-    /// Work the renders may skip (`--no-skip` switches skips off; see `render::plan`).
-    pub skips: Skips,
-}
-
-/// The loss of one photo at the fitted parameters.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct PhotoLoss {
-    pub image: String,
-    pub loss: f64,
-    pub pixels: usize,
-}
-
-/// One local search of a multi-start fit.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct StartResult {
-    pub method: StartMethod,
-    pub loss: f64,
-    pub alpha: [f64; 2],
-}
-
-/// One level of a coarse-to-fine fit.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct LevelResult {
-    /// Resolution of the first photo at this level.
-    pub resolution: [usize; 2],
-    pub loss: f64,
-    pub evaluations: usize,
-    pub seconds: f64,
-}
-
-/// The result of fitting one model: the material plus what produced it.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ModelFit {
-    #[serde(flatten)]
-    pub material: Material,
-    /// Reflectance at normal incidence implied by the fitted Fresnel.
-    pub f0: [f64; 3],
-    pub loss: f64,
-    pub loss_kind: LossKind,
-    pub optimizer: Optimizer,
-    /// The gradient L-BFGS used (`None` for Nelder-Mead, which needs none).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub gradient: Option<GradientMethod>,
-    pub iterations: u64,
-    /// Objective evaluations, projected solves' renders included.
-    pub evaluations: usize,
-    pub termination: String,
-    pub seconds: f64,
-    /// How the first local search started, and from where.
-    pub start_method: StartMethod,
-    pub start: Material,
-    /// Every local search of a multi-start fit (`--starts`), best first.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub starts: Vec<StartResult>,
-    /// Every level of a coarse-to-fine fit (`--pyramid`), coarsest first.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub levels: Vec<LevelResult>,
-    pub photos: Vec<PhotoLoss>,
-    pub trace: Vec<TracePoint>,
-    /// What the renders of the final level skipped (`render::plan`).
-    #[serde(default)]
-    pub render_plan: PlanSummary,
-    /// The fitted exposure (`--fit-exposure`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub exposure: Option<ExposureEstimate>,
-}
-
-impl ModelFit {
-    /// The fitted exposure, 1 when none was fitted.
-    pub fn exposure_value(&self) -> f64 {
-        self.exposure.map_or(1.0, |e| e.value)
-    }
-
-    /// Coordinates of this fit in `space`.
-    pub fn point(&self, space: &ParamSpace) -> Vec<f64> {
-        space.point(&self.material, self.exposure_value())
-    }
-
-    /// `records` as this fit predicts them: irradiance times the fitted exposure.
-    pub fn exposed<'r>(&self, records: &'r ShadingRecords) -> Cow<'r, ShadingRecords> {
-        exposed_records(records, self.exposure_value())
-    }
-}
-
-/// Coarse levels stop before a photo's shorter side falls below this many pixels.
-const PYRAMID_MIN_SIDE: usize = 16;
-
-/// Fit one model (the one in `options.space`) to the records.
+/// Fit one model (the one in `options.space`) to the records: the point estimate
+/// ([`point::fit_point`]) with the Laplace interval of its exposure when it fits one
+/// ([`bayes::exposure::with_interval`]).
 pub fn fit_model(records: &ShadingRecords, options: &FitOptions) -> Result<ModelFit> {
-    let started = Instant::now();
-    let mut coarse: Vec<ShadingRecords> = Vec::new();
-    while coarse.len() + 1 < options.pyramid.max(1) {
-        let finest = coarse.last().unwrap_or(records);
-        match finest.coarsened() {
-            Some(c)
-                if c.photos
-                    .iter()
-                    .all(|s| s.width.min(s.height) >= PYRAMID_MIN_SIDE) =>
-            {
-                coarse.push(c)
+    let point = point::fit_point(records, options)?;
+    Ok(bayes::exposure::with_interval(point, records, options))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    /// Every `.rs` file below `dir`.
+    fn sources(dir: &Path, found: &mut Vec<std::path::PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                sources(&path, found);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                found.push(path);
             }
-            _ => break,
         }
     }
-    let mut levels = Vec::new();
-    let mut start: Option<Vec<f64>> = None;
-    let mut evaluations = 0;
-    for level in coarse.iter().rev() {
-        let level_started = Instant::now();
-        let fit = fit_level(level, options, start.take(), false)?;
-        evaluations += fit.evaluations;
-        levels.push(LevelResult {
-            resolution: [level.photos[0].width, level.photos[0].height],
-            loss: fit.loss,
-            evaluations: fit.evaluations,
-            seconds: level_started.elapsed().as_secs_f64(),
-        });
-        start = Some(fit.point(&options.space));
-    }
-    let level_started = Instant::now();
-    let mut fit = fit_level(records, options, start, options.progress)?;
-    if !levels.is_empty() {
-        levels.push(LevelResult {
-            resolution: [records.photos[0].width, records.photos[0].height],
-            loss: fit.loss,
-            evaluations: fit.evaluations,
-            seconds: level_started.elapsed().as_secs_f64(),
-        });
-    }
-    fit.evaluations += evaluations;
-    fit.levels = levels;
-    fit.exposure = exposure::estimate(
-        options.space,
-        records,
-        options.loss,
-        options.seed,
-        &fit.point(&options.space),
-        fit.loss,
-    );
-    fit.seconds = started.elapsed().as_secs_f64();
-    Ok(fit)
-}
 
-/// Fit at one resolution: global start (or the given one), local searches, report.
-fn fit_level(
-    records: &ShadingRecords,
-    options: &FitOptions,
-    given_start: Option<Vec<f64>>,
-    progress: bool,
-) -> Result<ModelFit> {
-    let space = options.space;
-    let objective = Objective::new(space, records, options.loss, options.seed)
-        .with_gradient(options.gradient)
-        .with_skips(options.skips);
-    // Stochastic models: the global start is searched on one render, the local searches use
-    // the unbiased pair loss (see `Objective::single_render` and `crate::loss`).
-    let screening = Objective::new(space, records, options.loss, options.seed)
-        .with_gradient(options.gradient)
-        .with_skips(options.skips)
-        .single_render();
-    if objective.pixel_count() == 0 {
-        return Err(Error::argument(
-            "photos",
-            "no pixel enters the loss (all masked, saturated, non-finite or outside the sample)",
-        ));
-    }
-    let argmin_failed = |e: ArgminError| Error::argument("optimizer", e.to_string());
-    let mut projected_renders = 0;
-    let (x0, start_method) = match given_start {
-        Some(x) => (x, StartMethod::Coarser),
-        None => match (options.optimizer, options.projection) {
-            (Optimizer::Pso, _) => (
-                start::swarm_start(&screening, options.seed).map_err(argmin_failed)?,
-                StartMethod::Pso,
-            ),
-            (_, true) => match Projection::new(&screening) {
-                Some(projection) => {
-                    let x = start::projected_start(&projection).map_err(argmin_failed)?;
-                    projected_renders = projection.renders();
-                    (x, StartMethod::Projection)
-                }
-                None => (start::scan_point(&screening), StartMethod::Scan),
-            },
-            (_, false) => (start::scan_point(&screening), StartMethod::Scan),
-        },
-    };
-    let mut starts = vec![(x0.clone(), start_method)];
-    if start_method != StartMethod::Coarser {
-        starts.extend(
-            start::random_points(&space, options.seed, options.starts.saturating_sub(1))
-                .into_iter()
-                .map(|x| (x, StartMethod::Random)),
+    #[test]
+    fn point_room_never_calls_into_the_bayes_room() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/fit/point");
+        let mut files = Vec::new();
+        sources(&dir, &mut files);
+        assert!(
+            files.len() >= 8,
+            "point/ sources not found in {}",
+            dir.display()
         );
-    }
-    let recorder = Recorder::new(
-        progress.then(|| Progress::new(&format!("fit {}", space.model), options.max_iters)),
-    );
-    let local = options.optimizer.local(space.model);
-    let mut iterations = 0;
-    let mut results = Vec::new();
-    for (x, method) in starts {
-        // The objective tracks the best point of each search (line-search probes included).
-        *objective.best.lock().expect("no panics") = (f64::INFINITY, Vec::new());
-        let (i, termination) = local::search(&objective, local, x, options.max_iters, &recorder)
-            .map_err(argmin_failed)?;
-        let (cost, best_x) = objective.best.lock().expect("no panics").clone();
-        results.push((cost, best_x, method, termination));
-        iterations += i;
-    }
-    recorder.finish();
-    if objective.is_paired() && results.len() > 1 {
-        // Each search minimised the pair loss on the same streams and so also chased their
-        // noise; rank the results on fresh streams, which that noise does not follow.
-        let judge = Objective::new(space, records, options.loss, options.seed.wrapping_add(1))
-            .with_skips(options.skips);
-        for result in &mut results {
-            result.0 = judge.loss(&result.1) / judge.loss_from_cost(1.0);
+        for file in files {
+            let text = std::fs::read_to_string(&file).unwrap();
+            for (n, line) in text.lines().enumerate() {
+                // Doc comments may name the other room; code may not.
+                let code = line.trim_start();
+                if code.starts_with("//") {
+                    continue;
+                }
+                let names_bayes = code.match_indices("bayes").any(|(i, _)| {
+                    let ident = |c: char| c.is_alphanumeric() || c == '_';
+                    !code[..i].ends_with(ident) && !code[i + 5..].starts_with(ident)
+                });
+                assert!(
+                    !names_bayes,
+                    "{}:{}: the point room calls into bayes: {line}",
+                    file.display(),
+                    n + 1
+                );
+            }
         }
     }
-    results.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let (_, best_x, _, termination) = results[0].clone();
-    let material = space.material(&best_x);
-    let photos = objective
-        .loss_per_photo(&best_x)
-        .into_iter()
-        .map(|(i, loss, pixels)| PhotoLoss {
-            image: records.photos[i].stem.clone(),
-            loss,
-            pixels,
-        })
-        .collect();
-    let loss = objective.loss(&best_x);
-    let evaluations = [&objective, &screening]
-        .iter()
-        .map(|o| o.evaluations.load(std::sync::atomic::Ordering::Relaxed))
-        .sum::<usize>()
-        + projected_renders;
-    let trace = recorder.trace.lock().expect("no panics").clone();
-    let f0 = material.fresnel.f0();
-    let starts = if results.len() > 1 {
-        results
-            .iter()
-            .map(|(cost, x, method, _)| StartResult {
-                method: *method,
-                loss: objective.loss_from_cost(*cost),
-                alpha: space.material(x).alpha,
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
-    let render_plan = objective.plan_summary(&material);
-    Ok(ModelFit {
-        material,
-        f0,
-        loss,
-        loss_kind: options.loss,
-        optimizer: options.optimizer,
-        gradient: (local == LocalOptimizer::Lbfgs).then(|| objective.gradient_method()),
-        iterations,
-        evaluations,
-        termination,
-        seconds: 0.0,
-        start_method,
-        start: space.material(&x0),
-        starts,
-        levels: Vec::new(),
-        photos,
-        trace,
-        render_plan,
-        exposure: space.exposure.then(|| ExposureEstimate {
-            value: space.exposure(&best_x),
-            interval: None,
-        }),
-    })
-}
-
-/// Edge tint of each channel of a conductor fit, for reports (`None` for other Fresnel kinds).
-pub fn edge_tint(material: &Material) -> Option<[f64; 3]> {
-    match material.fresnel {
-        FresnelSpec::Conductor { eta, k } => {
-            Some([0, 1, 2].map(|c| reflectivity_edge_tint_from_ior(eta[c], k[c]).1))
-        }
-        _ => None,
-    }
-}
-
-/// The model names a fit file may list as candidates.
-pub fn model_names(models: &[Model]) -> Vec<&'static str> {
-    models.iter().map(|m| m.name()).collect()
 }

@@ -35,7 +35,7 @@ use super::{normal_from_slopes, to_shading_frame, MaterialMaps, TexelGrid};
 use crate::bsdf::{differentiable, BounceCap, Model, Rng};
 use crate::error::{Error, Result};
 use crate::fit::cholesky::Cholesky;
-use crate::fit::params::{logit, ParamSpace};
+use crate::fit::point::params::{logit, ParamSpace};
 use crate::material::{FresnelSpec, Material};
 use crate::progress::Progress;
 use crate::scalar::{Real, Rgb, Vec3};
@@ -760,7 +760,8 @@ fn basis_fits(
         .map(|(c, (centre, &kind))| Basis {
             kind,
             alpha: centre[0].exp(),
-            f0: (specular == 4).then(|| [1, 2, 3].map(|j| crate::fit::params::sigmoid(centre[j]))),
+            f0: (specular == 4)
+                .then(|| [1, 2, 3].map(|j| crate::fit::point::params::sigmoid(centre[j]))),
             share: clusters.assignment.iter().filter(|&&a| a == c).count() as f64 / total,
         })
         .collect();

@@ -131,7 +131,7 @@ fn f0_with_tangents(fresnel: &Fresnel<f64>) -> [(f64, f64, f64); 3] {
 }
 
 /// The derivatives of each pixel's prediction with respect to the kernel's parameters, per
-/// channel: what the chain rule of a fit needs (`fit::objective`).
+/// channel: what the chain rule of a fit needs (`fit::point::objective`).
 #[derive(Clone, Debug, Default)]
 pub struct PixelTangents {
     /// `d p_c / d ax`, `d p_c / d ay`.

@@ -5,7 +5,7 @@
 //! pixel-footprint average that cameras and renderers such as Mitsuba 3 produce. Pixels are
 //! processed in parallel with rayon; a stochastic model draws from the random stream of its
 //! pixel index, so the result does not depend on the thread count. One pixel loop serves every
-//! scalar type: `f64` for the cost, dual numbers for exact gradients (`fit::objective`).
+//! scalar type: `f64` for the cost, dual numbers for exact gradients (`fit::point::objective`).
 //!
 //! [`render_planned`] renders through a [`plan::RenderPlan`], which skips the work a scene does
 //! not need (issue #5): fits render the same pixels hundreds of times, so the plan is built
@@ -111,7 +111,7 @@ pub fn render_planned<T: Real, B: ScalarBrdf<T> + ?Sized>(
 /// where the multiple-bounce term is interpolated from anchors, the exact single-bounce term
 /// and the diffuse term are summed in one pass ([`render_planned_split`]) and each seed adds
 /// only its interpolated estimate; where the term is skipped, one render serves every seed. The
-/// pair loss of the stochastic models compares two renders (`fit::objective`), so this halves
+/// pair loss of the stochastic models compares two renders (`fit::point::objective`), so this halves
 /// their per-pixel work. Equal to the renders of [`render_planned`] up to the rounding of one
 /// addition per pixel.
 #[allow(clippy::too_many_arguments)]
@@ -168,7 +168,7 @@ pub fn add_to<T: Real>(target: &mut [[T; 3]], addend: &[[T; 3]]) {
 /// diffuse terms at the pixels with anchors (`None` when `diffuse` is `None`: not wanted), and
 /// per seed of `seeds` the rest: the interpolated estimate, and the whole value of the pixels
 /// without anchors. The parts sum to the render. `None` when the plan does not interpolate at
-/// this roughness. Variable projection (`fit::projection`) uses the split because the shared
+/// this roughness. Variable projection (`fit::point::projection`) uses the split because the shared
 /// part is affine in a Schlick F0 and needs no render at its inner nodes.
 #[allow(clippy::too_many_arguments)]
 pub fn render_planned_split<T: Real, B: ScalarBrdf<T> + ?Sized>(

@@ -20,8 +20,8 @@ pub mod markdown;
 pub mod plots;
 
 use crate::bsdf::Model;
-use crate::fit::posterior::{ParamSummary, Posterior as FitPosterior};
-use crate::fit::selection::{mean_and_standard_error, HeldOutRanking, Selection};
+use crate::fit::bayes::posterior::{ParamSummary, Posterior as FitPosterior};
+use crate::fit::bayes::selection::{mean_and_standard_error, HeldOutRanking, Selection};
 use crate::fit::{edge_tint, ModelFit, TracePoint};
 use crate::loss::LossKind;
 use serde::{Deserialize, Serialize};
@@ -127,7 +127,7 @@ pub struct ModelRow {
     pub parameters: Vec<Parameter>,
     pub bic: f64,
     pub delta_bic: f64,
-    pub evidence: crate::fit::selection::Evidence,
+    pub evidence: crate::fit::bayes::selection::Evidence,
     pub seconds: f64,
     pub evaluations: usize,
     pub held_out: Option<HeldOut>,

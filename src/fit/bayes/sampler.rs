@@ -299,7 +299,7 @@ pub fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::diagnostics::{bulk_ess, split_rhat};
+    use crate::fit::bayes::diagnostics::{bulk_ess, split_rhat};
 
     /// An unnormalised Gaussian `c exp(-(x - m)^T P (x - m) / 2)` with precision `P`.
     struct Gaussian {

@@ -3,7 +3,7 @@
 //!
 //! 1. Likelihood data: the records, optionally cut to a seeded random subset of pixels
 //!    ([`log_posterior::pixel_subset`]; `--mcmc-pixels`).
-//! 2. MAP start: [`fit_model`] for every candidate on those records; the noise level is given
+//! 2. MAP start: [`fit_point`] (with the exposure's interval, [`with_interval`]) for every candidate on those records; the noise level is given
 //!    or estimated from the lowest MAP loss (one level for all candidates).
 //! 3. Laplace approximation of each candidate's log posterior at its MAP ([`Laplace`]).
 //! 4. Chains: `chains` product-space chains ([`sampler`]), chain `c` starting in candidate
@@ -28,13 +28,14 @@
 //! different fingerprint is refused. Floats survive the JSON round trip exactly (serde_json's
 //! `float_roundtrip`).
 
+use super::exposure::with_interval;
 use super::laplace::Laplace;
 use super::log_posterior::{self, LogPosterior, Noise, Reading};
-use super::params::ParamSpace;
 use super::posterior::{summarise, Posterior, RunFacts};
 use super::sampler::{self, Candidate, ChainState, Schedule, Target};
-use super::{fit_model, FitOptions, ModelFit};
 use crate::error::{Error, Result};
+use crate::fit::point::params::ParamSpace;
+use crate::fit::point::{fit_point, FitOptions, ModelFit};
 use crate::progress::Progress;
 use crate::shading::ShadingRecords;
 use serde::{Deserialize, Serialize};
@@ -202,13 +203,11 @@ fn prepare(
     let maps = candidates
         .iter()
         .map(|&space| {
-            fit_model(
-                records,
-                &FitOptions {
-                    space,
-                    ..options.map.clone()
-                },
-            )
+            let map = FitOptions {
+                space,
+                ..options.map.clone()
+            };
+            Ok(with_interval(fit_point(records, &map)?, records, &map))
         })
         .collect::<Result<Vec<_>>>()?;
     let map_seconds = started.elapsed().as_secs_f64();

@@ -40,9 +40,9 @@
 //! a deterministic function of the coordinates (a fixed-noise approximation of the posterior of
 //! the exact model, with the models' per-pixel Monte Carlo error added to the image noise).
 
-use super::objective::Objective;
-use super::params::{sigmoid, ParamSpace};
 use super::sampler::Target;
+use crate::fit::point::objective::Objective;
+use crate::fit::point::params::{sigmoid, ParamSpace};
 use crate::loss::LossKind;
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Gradient};

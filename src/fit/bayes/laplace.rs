@@ -14,8 +14,8 @@
 //! Standard coordinates: `z = R^T (x - mu)` with `H = R R^T`, so `z ~ N(0, I)` under the
 //! approximation and `x = mu + R^-T z`.
 
-use super::cholesky::Cholesky;
 use super::sampler::Target;
+use crate::fit::cholesky::Cholesky;
 use serde::{Deserialize, Serialize};
 
 /// Smallest precision of any coordinate (standard deviation at most 10 in log or logit units,

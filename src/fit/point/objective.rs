@@ -21,7 +21,7 @@ use crate::bsdf::single::SingleBounce;
 use crate::bsdf::Model;
 use crate::bsdf::ScalarBrdf;
 use crate::bsdf::{differentiable, BounceCap};
-use crate::fit::params::Surface;
+use crate::fit::point::params::Surface;
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::anchors::Anchors;
 use crate::render::batch::{BatchRecords, Lobe, PixelTangents};

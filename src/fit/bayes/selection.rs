@@ -9,7 +9,7 @@
 //! | quantity | definition | source |
 //! | --- | --- | --- |
 //! | `n` | observations: pixels in the loss x 3 channels | |
-//! | `k` | free parameters of the fit ([`crate::fit::params::ParamSpace::dim`]) | |
+//! | `k` | free parameters of the fit ([`crate::fit::point::params::ParamSpace::dim`]) | |
 //! | `rss / n` | mean squared residual `sum w (p - t)^2 / (3 sum w)` at the fitted material (the L2 loss, whatever loss was fitted) | |
 //! | BIC | `n ln(rss / n) + k ln n`: Gaussian noise of unknown variance, profiled out | Schwarz 1978; Kass & Raftery 1995, eq. 9 |
 //! | Delta-BIC | `BIC - min BIC`, approximately `2 ln` of the Bayes factor for the best model | Kass & Raftery 1995, section 4.1 |

@@ -21,8 +21,8 @@
 
 use super::diagnostics::{bulk_ess, split_rhat};
 use super::log_posterior::Noise;
-use super::params::{FresnelFamily, ParamSpace};
 use super::sampler::{ChainState, Counts, Draw};
+use crate::fit::point::params::{FresnelFamily, ParamSpace};
 use crate::material::FresnelSpec;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -308,8 +308,8 @@ pub fn summarise(spaces: &[ParamSpace], states: &[ChainState], facts: RunFacts) 
 mod tests {
     use super::*;
     use crate::bsdf::Model;
-    use crate::fit::log_posterior::Reading;
-    use crate::fit::params::logit;
+    use crate::fit::bayes::log_posterior::Reading;
+    use crate::fit::point::params::logit;
 
     #[test]
     fn diffuse_choice_is_pooled_by_model_name_and_reported_as_a_probability() {

@@ -11,9 +11,9 @@
 //! describes the material better, so held-out error is a ranking that needs no noise model
 //! (Hastie, Tibshirani & Friedman, *Elements of Statistical Learning*, section 7.10).
 
-use super::objective::render_seeds;
-use super::{fit_model, FitOptions};
 use crate::error::{Error, Result};
+use crate::fit::point::objective::render_seeds;
+use crate::fit::point::{fit_point, FitOptions};
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::material::Material;
 use crate::render::render_pixels;
@@ -71,7 +71,8 @@ pub fn cross_validate(
         .map(|fold| {
             let training = records.restricted_to_photos(|i| fold_of(i, folds) != fold);
             let held_out = records.restricted_to_photos(|i| fold_of(i, folds) == fold);
-            let fit = fit_model(&training, options)?;
+            // Only the point estimate: the exposure's interval would not be used.
+            let fit = fit_point(&training, options)?.fit;
             loss_of(
                 &fit.material,
                 &fit.exposed(&held_out),

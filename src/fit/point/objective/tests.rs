@@ -5,7 +5,7 @@ use super::*;
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::testing::unit;
 use crate::bsdf::Model;
-use crate::fit::params::FresnelFamily;
+use crate::fit::point::params::FresnelFamily;
 use crate::material::Material;
 use crate::microfacet::{Height, NdfKind};
 use crate::render::{render_model, render_pixels};

@@ -1,0 +1,11 @@
+//! Bayesian inference over the point estimates' parameter spaces.
+
+pub mod diagnostics;
+pub mod exposure;
+pub mod holdout;
+pub mod laplace;
+pub mod log_posterior;
+pub mod mcmc;
+pub mod posterior;
+pub mod sampler;
+pub mod selection;
