@@ -328,6 +328,7 @@ properties_of_every_model! {
     fast_msx => Model::FastMsx,
     kulla_conty => Model::KullaConty,
     turquin => Model::Turquin,
+    tabulated => Model::Tabulated,
 }
 
 #[test]

@@ -471,8 +471,10 @@ mod tests {
 
     #[test]
     fn tint_table_keeps_f0_and_follows_the_exact_fit() {
+        // The conductor family cannot follow Schlick's rise to 1 at grazing for small F0 (at
+        // F0 = 0 the difference reaches 0.995), so the table is held to the exact per-value
+        // fit, not to an absolute bound.
         let table = SchlickTintTable::get();
-        assert!(table.max_error < 0.02, "{}", table.max_error);
         for f0 in [0.0123, 0.04, 0.5, 0.913, 1.0] {
             let (eta, k) = table.conductor(f0);
             let kept = crate::microfacet::fresnel::conductor_f0(eta, k);
