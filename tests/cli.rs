@@ -421,7 +421,7 @@ fn stress_quick_json_reports_every_model_clean() {
     let out = run_ok(&["stress", "--quick", "--json", "--quiet"]);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let models = v["models"].as_array().unwrap();
-    assert_eq!(models.len(), 9);
+    assert_eq!(models.len(), bouncefit::bsdf::Model::ALL.len());
     for m in models {
         for key in [
             "model",
