@@ -120,11 +120,13 @@ fn intervals_cover_the_truth_on_noisy_synthetic_sets() {
             noise,
             set_index,
         );
-        // relative-l2 is the loss of synth's noise, proportional to radiance.
+        // relative-l2 is the loss of synth's noise, proportional to radiance. This is the
+        // calibration of the likelihood itself, so without the model-error adjustment (which
+        // only widens; its coverage is measured by scripts/interval-coverage.sh).
         let fit = mcmc_fit(
             &set,
             &dir.path().join(format!("fit{set_index}.json")),
-            &[&SCHEDULE[..], &["--loss", "relative-l2"]].concat(),
+            &[&SCHEDULE[..], &["--loss", "relative-l2", "--model-error", "none"]].concat(),
         );
         let posterior = &fit["posterior"];
         let rhat = posterior["rhat_max"].as_f64().unwrap();
@@ -317,4 +319,96 @@ fn bad_mcmc_options_are_refused_without_output() {
         assert!(err.contains(field), "{field}: {err}");
         assert!(!out.exists());
     }
+}
+
+/// Nine photos of an 8 cm sample, 24x24 pixels: five flash photos from different camera
+/// positions and four oblique point lights; `{e0}`..`{e8}` are the photos' exposures.
+fn nine_photo_capture(exposures: &[f64; 9]) -> String {
+    let cameras = [[0.0, 0.0], [3.0, 3.2], [-2.6, -2.1], [2.4, -2.8], [-3.1, 2.5]];
+    let lights = [[-9.0, 2.0, 12.0], [6.0, -8.0, 10.0], [7.0, 7.0, 11.0], [-5.0, -7.0, 13.0]];
+    let mut text = String::from(
+        "name = \"nine\"\nunits = \"cm\"\n[sample]\nwidth = 8.0\nheight = 8.0\n[camera]\n\
+         model = \"rectified\"\nposition = [0.0, 0.0, 18.0]\nresolution = [24, 24]\n",
+    );
+    for (i, exposure) in exposures.iter().enumerate() {
+        text += &format!("[[photo]]\nimage = \"{i:02}.exr\"\nexposure = {exposure}\n");
+        if let Some([x, y]) = cameras.get(i) {
+            text += &format!(
+                "camera = {{ position = [{x}, {y}, 17.5] }}\n\
+                 light = {{ kind = \"flash\", intensity = [1500.0, 1500.0, 1500.0] }}\n"
+            );
+        } else {
+            let [x, y, z] = lights[i - cameras.len()];
+            text += &format!(
+                "light = {{ kind = \"point\", position = [{x}, {y}, {z}], \
+                 intensity = [1500.0, 1500.0, 1500.0] }}\n"
+            );
+        }
+    }
+    text
+}
+
+#[test]
+fn per_photo_exposure_errors_widen_intervals_to_the_jackknife_spread() {
+    // Photos rendered at exposure 1, fitted under manifest exposures off by 3% (seeded normal
+    // factors): an error shared by each photo's pixels, which the likelihood alone reads as
+    // signal. The photo-clustered adjustment must widen F0's interval to the spread that the
+    // delete-one-photo jackknife of the point fit measures (Efron & Stein 1981: the jackknife
+    // variance (n - 1)/n sum (t_i - t_mean)^2), an estimator of the same variance by refits
+    // instead of scores; `--model-error none` must stay far narrower.
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("capture.toml");
+    std::fs::write(&capture, nine_photo_capture(&[1.0; 9])).unwrap();
+    let material_path = dir.path().join("m.material.json");
+    std::fs::write(&material_path, material("single", 0.3, [0.9, 0.6, 0.4])).unwrap();
+    let set = dir.path().join("set");
+    synth(&material_path, &capture, &set, &["--noise", "0.01", "--seed", "5", "--pixel-samples", "1"]);
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(77);
+    let exposures: [f64; 9] =
+        [0; 9].map(|_| 1.0 + 0.03 * rng.sample::<f64, _>(rand_distr::StandardNormal));
+    std::fs::write(set.join("capture.toml"), nine_photo_capture(&exposures)).unwrap();
+
+    let sd_of = |fit: &Value| {
+        let ci = &fit["posterior"]["params"]["f0"]["ci95"][0];
+        (ci[1].as_f64().unwrap() - ci[0].as_f64().unwrap()) / 3.92
+    };
+    let adjusted = mcmc_fit(&set, &dir.path().join("photos.json"), &SCHEDULE);
+    let model_only = mcmc_fit(
+        &set,
+        &dir.path().join("none.json"),
+        &[&SCHEDULE[..], &["--model-error", "none"]].concat(),
+    );
+    let leave_one_out: Vec<f64> = (0..9)
+        .map(|left_out| {
+            let mut kept = exposures.to_vec();
+            kept.remove(left_out);
+            let fold = dir.path().join(format!("fold{left_out}"));
+            std::fs::create_dir_all(&fold).unwrap();
+            let full = nine_photo_capture(&exposures);
+            // Drop photo `left_out`'s block (its header line up to the next header).
+            let blocks: Vec<&str> = full.split("[[photo]]\n").collect();
+            let mut text = blocks[0].to_string();
+            for (i, block) in blocks[1..].iter().enumerate() {
+                if i != left_out {
+                    text += "[[photo]]\n";
+                    text += block;
+                }
+            }
+            std::fs::write(fold.join("capture.toml"), text).unwrap();
+            for i in (0..9).filter(|&i| i != left_out) {
+                let name = format!("{i:02}.exr");
+                std::fs::copy(set.join(&name), fold.join(&name)).unwrap();
+            }
+            let fit = fit_json(&fold, &["--pixel-samples", "1"], &dir.path().join(format!("jk{left_out}.json")));
+            fit["f0"][0].as_f64().unwrap()
+        })
+        .collect();
+    let mean = leave_one_out.iter().sum::<f64>() / 9.0;
+    let jackknife = (8.0 / 9.0 * leave_one_out.iter().map(|t| (t - mean).powi(2)).sum::<f64>()).sqrt();
+    let (with, without) = (sd_of(&adjusted), sd_of(&model_only));
+    eprintln!("F0 red sd: jackknife {jackknife:.5}, adjusted {with:.5}, model only {without:.5}");
+    // The two estimators of the between-photo variance agree within the jackknife's own
+    // finite-sample spread (8 degrees of freedom: a 95% range of about 0.55x to 1.45x in sd).
+    assert!((0.55..1.6).contains(&(with / jackknife)), "{with} against {jackknife}");
+    assert!(without < 0.4 * jackknife, "{without} against {jackknife}");
 }

@@ -9,6 +9,7 @@ use crate::capture::region::{AppliedRegion, SampleRegion};
 use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::bayes::mcmc::{sample_posterior, McmcOptions, PosteriorRun};
+use crate::fit::bayes::model_error::ModelError;
 use crate::fit::bayes::posterior::Posterior;
 use crate::fit::bayes::sampler::Schedule;
 use crate::fit::bayes::selection::{GaussianFit, Selection};
@@ -237,6 +238,10 @@ pub struct McmcArgs {
     /// Noise level of the likelihood in loss units (default: estimated from the best MAP loss).
     #[arg(long)]
     pub noise_sigma: Option<f64>,
+    /// How intervals account for model error: `photos` widens the posterior to the spread of
+    /// the photos' own evidence (photo-clustered sandwich), `none` trusts the model exactly.
+    #[arg(long, value_enum, default_value_t = ModelError::Photos)]
+    pub model_error: ModelError,
     /// Checkpoint file (default: the output path with extension `.mcmc-checkpoint.json`).
     #[arg(long)]
     pub checkpoint: Option<PathBuf>,
@@ -292,6 +297,7 @@ impl FitOptionArgs {
             },
             noise_sigma: mcmc.noise_sigma,
             pixels: mcmc.mcmc_pixels,
+            model_error: mcmc.model_error,
             checkpoint: Some(checkpoint),
             resume: mcmc.resume,
             stop_after: mcmc.mcmc_stop_after,

@@ -71,3 +71,14 @@ def smooth_image():
     base = np.stack([0.5 + 0.4 * np.sin(x / 5.0), 0.5 + 0.4 * np.cos(y / 4.0), (x + y) / 90.0 + 0.05], -1)
     base[10:20, 15:30] *= 0.2
     return np.clip(base + 0.02 * rng.standard_normal(base.shape), 0.01, 1.0)
+
+
+def exported_scenes(tmp_path, capture):
+    """A bundled capture's truth with Mitsuba's G2 (`height: uncorrelated`, so the export is
+    exact), exported as one Mitsuba scene per photo into tmp_path/scenes: (folder, material)."""
+    folder = ROOT / "datasets" / capture
+    material = json.loads((folder / "material.json").read_text())
+    material["height"] = "uncorrelated"
+    (tmp_path / "material.json").write_text(json.dumps(material))
+    run("export", tmp_path / "material.json", "--format", "mitsuba", "--scene", folder, "-o", tmp_path / "scenes")
+    return folder, material

@@ -12,7 +12,6 @@ are reported, not asserted. Mitsuba's render is Monte Carlo over each pixel (64 
 difference is printed with the time of both renders, measured in the same run.
 """
 
-import json
 import time
 
 import cv2
@@ -20,7 +19,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from conftest import CAPTURES, ROOT, read_exr, report, run, run_json
+from conftest import CAPTURES, exported_scenes, read_exr, report, run, run_json
 
 TOLERANCE = 0.01
 
@@ -38,11 +37,7 @@ def wholly_on_sample(photo):
 
 @pytest.mark.parametrize("capture", CAPTURES)
 def test_render_matches_mitsuba(tmp_path, capture):
-    folder = ROOT / "datasets" / capture
-    material = json.loads((folder / "material.json").read_text())
-    material["height"] = "uncorrelated"
-    (tmp_path / "material.json").write_text(json.dumps(material))
-    run("export", tmp_path / "material.json", "--format", "mitsuba", "--scene", folder, "-o", tmp_path / "scenes")
+    folder, material = exported_scenes(tmp_path, capture)
 
     start = time.perf_counter()
     run("render", "--capture", folder, "--material", tmp_path / "material.json", "--pixel-samples", 16,

@@ -40,6 +40,7 @@
 //! a deterministic function of the coordinates (a fixed-noise approximation of the posterior of
 //! the exact model, with the models' per-pixel Monte Carlo error added to the image noise).
 
+use super::model_error::Adjustment;
 use super::sampler::Target;
 use crate::fit::point::objective::Objective;
 use crate::fit::point::params::{sigmoid, ParamSpace};
@@ -59,7 +60,7 @@ pub const NOISE_FLOOR: f64 = 1e-5;
 pub const PROPORTIONAL_FLOOR: f64 = 1e-2;
 
 /// Relative step of the central differences of the proportional log-likelihood.
-const FD_STEP: f64 = 1e-5;
+pub(super) const FD_STEP: f64 = 1e-5;
 
 /// Support of the log-uniform roughness prior.
 pub const ALPHA_PRIOR: [f64; 2] = [1e-3, 3.0];
@@ -190,17 +191,29 @@ impl ProportionalData {
         }
     }
 
+    /// Per pixel: its part of `ln L` for predictions `predicted` (the objective's loss pixels,
+    /// in order).
+    fn pixel_log_likelihoods(&self, predicted: &[[f64; 3]], sigma: f64) -> Vec<f64> {
+        let s2 = sigma * sigma;
+        predicted
+            .iter()
+            .zip(&self.target)
+            .zip(&self.weight)
+            .map(|((p, t), w)| {
+                let sum: f64 = (0..3)
+                    .map(|c| {
+                        let v = s2 * (p[c] * p[c] + self.floor_squared);
+                        (p[c] - t[c]).powi(2) / v + (2.0 * std::f64::consts::PI * v).ln()
+                    })
+                    .sum();
+                -0.5 * w * sum
+            })
+            .collect()
+    }
+
     /// `ln L` of predictions `predicted` (the objective's loss pixels, in order).
     fn log_likelihood(&self, predicted: &[[f64; 3]], sigma: f64) -> f64 {
-        let s2 = sigma * sigma;
-        let mut sum = 0.0;
-        for ((p, t), w) in predicted.iter().zip(&self.target).zip(&self.weight) {
-            for c in 0..3 {
-                let v = s2 * (p[c] * p[c] + self.floor_squared);
-                sum += w * ((p[c] - t[c]).powi(2) / v + (2.0 * std::f64::consts::PI * v).ln());
-            }
-        }
-        -0.5 * sum
+        self.pixel_log_likelihoods(predicted, sigma).iter().sum()
     }
 }
 
@@ -212,6 +225,8 @@ pub struct LogPosterior<'a> {
     pub count: f64,
     priors: Vec<Prior>,
     proportional: Option<ProportionalData>,
+    /// The model-error adjustment through which the likelihood is read ([`super::model_error`]).
+    adjustment: Option<Adjustment>,
 }
 
 impl<'a> LogPosterior<'a> {
@@ -250,6 +265,20 @@ impl<'a> LogPosterior<'a> {
                 .then(|| ProportionalData::new(records)),
             noise,
             priors,
+            adjustment: None,
+        }
+    }
+
+    /// The same posterior with its likelihood read through `adjustment`.
+    pub fn with_adjustment(self, adjustment: Option<Adjustment>) -> Self {
+        LogPosterior { adjustment, ..self }
+    }
+
+    /// Where the likelihood is read for coordinates `x`.
+    fn likelihood_point(&self, x: &[f64]) -> Vec<f64> {
+        match &self.adjustment {
+            Some(a) => a.apply(x),
+            None => x.to_vec(),
         }
     }
 
@@ -261,6 +290,36 @@ impl<'a> LogPosterior<'a> {
         let cost = (&self.objective).cost(&x.to_vec()).unwrap_or(f64::INFINITY);
         let loss = self.objective.loss_from_cost(cost);
         self.noise.log_likelihood(loss, self.count).0
+    }
+
+    /// Per loss pixel (the objective's order): its part of `ln L` at `x`, up to a constant
+    /// (without the adjustment).
+    pub fn pixel_log_likelihoods(&self, x: &[f64]) -> Vec<f64> {
+        if let Some(data) = &self.proportional {
+            return data.pixel_log_likelihoods(&self.objective.predict(x), self.noise.sigma);
+        }
+        let loss = self.objective.image_loss();
+        let slope = self.noise.log_likelihood(0.0, self.count).1;
+        loss.renders_terms(&self.objective.renders(x))
+            .into_iter()
+            .map(|t| slope * loss.mean_of(&[t]))
+            .collect()
+    }
+
+    /// Gradient of `ln L` (without the adjustment) at `x`.
+    pub fn likelihood_gradient(&self, x: &[f64]) -> Vec<f64> {
+        if self.proportional.is_some() {
+            return central_differences(x, FD_STEP, |probe| vec![self.log_likelihood(probe)])
+                .remove(0);
+        }
+        let slope = self.noise.log_likelihood(0.0, self.count).1;
+        match (&self.objective).gradient(&x.to_vec()) {
+            Ok(cost_gradient) => cost_gradient
+                .into_iter()
+                .map(|c| slope * self.objective.loss_from_cost(c))
+                .collect(),
+            Err(_) => vec![f64::NAN; x.len()],
+        }
     }
 
     /// Log prior density and its gradient.
@@ -290,7 +349,7 @@ impl Target for LogPosterior<'_> {
         if prior == f64::NEG_INFINITY {
             return prior;
         }
-        let value = prior + self.log_likelihood(x);
+        let value = prior + self.log_likelihood(&self.likelihood_point(x));
         if value.is_nan() {
             f64::NEG_INFINITY
         } else {
@@ -299,31 +358,38 @@ impl Target for LogPosterior<'_> {
     }
 
     fn gradient(&self, x: &[f64]) -> Vec<f64> {
-        let (_, mut gradient) = self.log_prior(x);
-        if self.proportional.is_some() {
-            let mut probe = x.to_vec();
-            for i in 0..x.len() {
-                let h = FD_STEP * x[i].abs().max(1.0);
-                probe[i] = x[i] + h;
-                let plus = self.log_likelihood(&probe);
-                probe[i] = x[i] - h;
-                let minus = self.log_likelihood(&probe);
-                probe[i] = x[i];
-                gradient[i] += (plus - minus) / (2.0 * h);
-            }
-            return gradient;
-        }
-        let slope = self.noise.log_likelihood(0.0, self.count).1;
-        match (&self.objective).gradient(&x.to_vec()) {
-            Ok(cost_gradient) => {
-                for (g, c) in gradient.iter_mut().zip(cost_gradient) {
-                    *g += slope * self.objective.loss_from_cost(c);
-                }
-            }
-            Err(_) => gradient.fill(f64::NAN),
-        }
-        gradient
+        let (_, prior) = self.log_prior(x);
+        let likelihood = self.likelihood_gradient(&self.likelihood_point(x));
+        let likelihood = match &self.adjustment {
+            Some(a) => a.pull_back(&likelihood),
+            None => likelihood,
+        };
+        prior.iter().zip(likelihood).map(|(p, l)| p + l).collect()
     }
+}
+
+/// Central differences of each output of `f` at `x` with steps `step * max(1, |x_i|)`: row `k`
+/// is the gradient of output `k`.
+pub(super) fn central_differences(
+    x: &[f64],
+    step: f64,
+    f: impl Fn(&[f64]) -> Vec<f64>,
+) -> Vec<Vec<f64>> {
+    let mut rows: Vec<Vec<f64>> = Vec::new();
+    let mut probe = x.to_vec();
+    for i in 0..x.len() {
+        let h = step * x[i].abs().max(1.0);
+        probe[i] = x[i] + h;
+        let plus = f(&probe);
+        probe[i] = x[i] - h;
+        let minus = f(&probe);
+        probe[i] = x[i];
+        rows.resize_with(plus.len(), || vec![0.0; x.len()]);
+        for (row, (p, m)) in rows.iter_mut().zip(plus.iter().zip(&minus)) {
+            row[i] = (p - m) / (2.0 * h);
+        }
+    }
+    rows
 }
 
 /// The records with all but `count` randomly chosen (seeded) loss pixels given weight 0, or the

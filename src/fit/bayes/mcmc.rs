@@ -31,7 +31,8 @@
 use super::exposure::with_interval;
 use super::laplace::Laplace;
 use super::log_posterior::{self, LogPosterior, Noise, Reading};
-use super::posterior::{summarise, Posterior, RunFacts};
+use super::model_error::{self, Adjustment, ModelError};
+use super::posterior::{candidate_label, summarise, ModelErrorSummary, Posterior, RunFacts};
 use super::sampler::{self, Candidate, ChainState, Schedule, Target};
 use crate::error::{Error, Result};
 use crate::fit::point::params::ParamSpace;
@@ -61,6 +62,8 @@ pub struct McmcOptions {
     pub noise_sigma: Option<f64>,
     /// Pixels in the likelihood (0: all).
     pub pixels: usize,
+    /// How intervals account for model error ([`model_error`]).
+    pub model_error: ModelError,
     pub checkpoint: Option<PathBuf>,
     pub resume: bool,
     /// Stop (and checkpoint) after this many iterations per chain: for testing resumption.
@@ -84,6 +87,8 @@ struct Setup {
     maps: Vec<ModelFit>,
     noise: Noise,
     laplace: Vec<Laplace>,
+    /// Model-error adjustment of each candidate's likelihood.
+    adjustments: Vec<Option<Adjustment>>,
     map_seconds: f64,
 }
 
@@ -117,7 +122,7 @@ fn fingerprint(
     }
     let map = &options.map;
     format!(
-        "{hash:016x} {candidates:?} {:?} {:?} {} {} {} {} {:?} {:?} {}",
+        "{hash:016x} {candidates:?} {:?} {:?} {} {} {} {} {:?} {:?} {} {:?}",
         map.loss,
         map.optimizer,
         map.max_iters,
@@ -126,7 +131,8 @@ fn fingerprint(
         map.pyramid,
         options.schedule,
         options.noise_sigma,
-        options.pixels
+        options.pixels,
+        options.model_error
     )
 }
 
@@ -225,24 +231,39 @@ fn prepare(
             log_posterior::rms_target(records),
         ),
     };
-    let laplace = candidates
+    let target = |space: ParamSpace, adjustment: Option<Adjustment>| {
+        LogPosterior::new(
+            space,
+            records,
+            options.map.loss,
+            options.schedule.seed,
+            noise,
+        )
+        .with_adjustment(adjustment)
+    };
+    let mut laplace: Vec<Laplace> = candidates
         .iter()
         .zip(&maps)
-        .map(|(&space, map)| {
-            let target = LogPosterior::new(
-                space,
-                records,
-                options.map.loss,
-                options.schedule.seed,
-                noise,
-            );
-            Laplace::at_mode(&target, &map.point(&space))
-        })
+        .map(|(&space, map)| Laplace::at_mode(&target(space, None), &map.point(&space)))
         .collect();
+    let adjustments: Vec<Option<Adjustment>> = match options.model_error {
+        ModelError::None => vec![None; candidates.len()],
+        ModelError::Photos => candidates
+            .iter()
+            .zip(&laplace)
+            .map(|(&space, l)| model_error::photo_clustered(&target(space, None), l))
+            .collect(),
+    };
+    for ((l, &space), adjustment) in laplace.iter_mut().zip(candidates).zip(&adjustments) {
+        if adjustment.is_some() {
+            *l = Laplace::at_mode(&target(space, adjustment.clone()), &l.mean);
+        }
+    }
     Ok(Setup {
         maps,
         noise,
         laplace,
+        adjustments,
         map_seconds,
     })
 }
@@ -274,7 +295,11 @@ pub fn sample_posterior(
     let started = Instant::now();
     let targets: Vec<LogPosterior> = candidates
         .iter()
-        .map(|&space| LogPosterior::new(space, &data, options.map.loss, schedule.seed, setup.noise))
+        .zip(&setup.adjustments)
+        .map(|(&space, adjustment)| {
+            LogPosterior::new(space, &data, options.map.loss, schedule.seed, setup.noise)
+                .with_adjustment(adjustment.clone())
+        })
         .collect();
     let chain_candidates: Vec<Candidate> = targets
         .iter()
@@ -350,6 +375,22 @@ pub fn sample_posterior(
             warmup: schedule.warmup,
             kept: schedule.samples,
             noise: setup.noise,
+            model_error: candidates
+                .iter()
+                .zip(&setup.adjustments)
+                .enumerate()
+                .filter_map(|(index, (space, adjustment))| {
+                    let a = adjustment.as_ref()?;
+                    Some((
+                        candidate_label(candidates, index),
+                        ModelErrorSummary {
+                            method: model_error::METHOD.to_string(),
+                            photos: a.photos,
+                            widening: space.names().into_iter().zip(a.widening.clone()).collect(),
+                        },
+                    ))
+                })
+                .collect(),
             pixels,
             log_evidence,
             map_seconds: setup.map_seconds,

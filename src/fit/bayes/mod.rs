@@ -6,6 +6,7 @@ pub mod holdout;
 pub mod laplace;
 pub mod log_posterior;
 pub mod mcmc;
+pub mod model_error;
 pub mod posterior;
 pub mod sampler;
 pub mod selection;

@@ -18,6 +18,7 @@
 //! | `per_model` | probability, draws and parameter summary within each candidate (no diagnostics: the draws of one model are not a Markov chain) |
 //! | `acceptance` | within-model (MALA) and between-model acceptance rates after warm-up |
 //! | `noise` | the likelihood's reading, noise level and whether it was estimated |
+//! | `model_error` | per candidate (labels as in `per_model`): the model-error adjustment's method, the photos it compared and each coordinate's widening (adjusted over model-only standard deviation); absent with `--model-error none` ([`super::model_error`]) |
 
 use super::diagnostics::{bulk_ess, split_rhat};
 use super::log_posterior::Noise;
@@ -88,6 +89,10 @@ pub struct Posterior {
     /// Kept iterations per chain.
     pub kept: u64,
     pub noise: Noise,
+    /// The model-error adjustment of each candidate (labels as in `per_model`); empty with
+    /// `--model-error none` or too few photos ([`super::model_error`]).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub model_error: BTreeMap<String, ModelErrorSummary>,
     /// Pixels in the likelihood.
     pub pixels: usize,
     /// Wall time of the optimiser runs (MAP starts).
@@ -95,6 +100,17 @@ pub struct Posterior {
     /// Wall time of the Laplace approximations and the chains.
     pub seconds: f64,
     pub ess_per_second: f64,
+}
+
+/// How far the photo-clustered adjustment widened one candidate's posterior.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelErrorSummary {
+    pub method: String,
+    /// Photos whose scores were compared.
+    pub photos: usize,
+    /// Per coordinate of the parameter space (`ln_alpha`, `logit_f0_r`, ...): adjusted
+    /// posterior standard deviation over the model's, at least 1.
+    pub widening: BTreeMap<String, f64>,
 }
 
 /// Label of a candidate in `per_model`: the model name, `+diffuse` when diffuse is a choice.
@@ -211,6 +227,7 @@ pub struct RunFacts {
     pub warmup: u64,
     pub kept: u64,
     pub noise: Noise,
+    pub model_error: BTreeMap<String, ModelErrorSummary>,
     pub pixels: usize,
     pub log_evidence: Vec<f64>,
     pub map_seconds: f64,
@@ -297,6 +314,7 @@ pub fn summarise(spaces: &[ParamSpace], states: &[ChainState], facts: RunFacts) 
         warmup: facts.warmup,
         kept: facts.kept,
         noise: facts.noise,
+        model_error: facts.model_error,
         pixels: facts.pixels,
         map_seconds: facts.map_seconds,
         seconds: facts.seconds,
@@ -367,6 +385,7 @@ mod tests {
             warmup: 0,
             kept: 16,
             noise,
+            model_error: BTreeMap::new(),
             pixels: 1,
             log_evidence: vec![0.0, 0.0, 2.0f64.ln()],
             map_seconds: 0.0,

@@ -331,6 +331,11 @@ impl<'a> Objective<'a> {
         self.records
     }
 
+    /// Where each loss pixel sits in its photo.
+    pub fn layout(&self) -> &ImageLayout {
+        &self.layout
+    }
+
     /// Indices of the record pixels that enter the loss.
     pub fn pixels(&self) -> &[usize] {
         &self.pixels
