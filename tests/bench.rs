@@ -42,6 +42,7 @@ fn quick_json_has_the_contract_fields_and_consistent_values() {
             .unwrap(),
         "--fit-sets",
         repo("datasets/copper-flash").to_str().unwrap(),
+        "--no-maps",
         "-o",
         out.to_str().unwrap(),
     ]);
@@ -212,4 +213,101 @@ fn bad_input_exits_2_before_measuring_and_leaves_no_output() {
 
     let err = run_bad(&["bench", "--configs", "0"]);
     assert!(err.contains("--configs"), "{err}");
+
+    let err = run_bad(&["bench", "--quick", "--maps-texels", "0"]);
+    assert!(err.contains("--maps-texels"), "{err}");
+    let err = run_bad(&[
+        "bench",
+        "--quick",
+        "--quiet",
+        "--maps-models",
+        "single,bitterli",
+        "-o",
+        dir.path().join("out").to_str().unwrap(),
+    ]);
+    assert!(err.contains("bitterli is stochastic"), "{err}");
+    assert!(!dir.path().join("out").exists());
+}
+
+/// Maps fit jobs (issue #17's speed figure) on `datasets/two-materials`' maps rendered as 9
+/// flash photos of 24x24: a row per model and texel grid with its time over single's at the
+/// same grid, and a held-out photo predicted far better than by the mean of the other photos
+/// (measured at 64^2 texels of the bundled set: 0.039 against 0.235).
+#[test]
+fn maps_fit_jobs_report_time_ratios_and_held_out_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let template = std::fs::read_to_string(repo("datasets/sources/copper-flash.capture.toml"))
+        .unwrap()
+        .replace("resolution = [128, 128]", "resolution = [24, 24]");
+    assert!(template.contains("[24, 24]"));
+    let capture = dir.path().join("capture.toml");
+    std::fs::write(&capture, template).unwrap();
+    let set = dir.path().join("set");
+    synth(
+        &repo("datasets/two-materials/material.json"),
+        &capture,
+        &set,
+        &["--noise", "0.01"],
+    );
+    let stdout = run_ok(&[
+        "bench",
+        "--quick",
+        "--json",
+        "--quiet",
+        "--models",
+        "single",
+        "--configs",
+        "4",
+        "--reference-samples",
+        "16",
+        "--render-resolution",
+        "8",
+        "--fit-halvings",
+        "5",
+        "--fit-sets",
+        repo("datasets/copper-flash").to_str().unwrap(),
+        "--maps-sets",
+        set.to_str().unwrap(),
+        "--maps-models",
+        "single,kulla-conty",
+        "--maps-texels",
+        "8,full",
+    ]);
+    let v: Value = serde_json::from_str(&stdout).unwrap();
+    let maps: Vec<&Value> = v["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|j| j["job"] == "maps-fit")
+        .collect();
+    assert_eq!(maps.len(), 4);
+    let seconds = |j: &Value| j["seconds"].as_f64().unwrap();
+    for j in &maps {
+        let side = if j["texels"] == serde_json::json!([8, 8]) {
+            8
+        } else {
+            24
+        };
+        assert_eq!(j["texels"], serde_json::json!([side, side]), "{j}");
+        assert_eq!(
+            (j["photos"].as_u64(), j["skip"].as_bool()),
+            (Some(9), Some(false))
+        );
+        let single = maps
+            .iter()
+            .find(|s| s["model"] == "single" && s["texels"] == j["texels"])
+            .unwrap();
+        let ratio = j["seconds_vs_single"].as_f64().unwrap();
+        assert!((ratio - seconds(j) / seconds(single)).abs() < 1e-12, "{j}");
+        let (error, baseline) = (
+            j["held_out_error"].as_f64().unwrap(),
+            j["held_out_baseline"].as_f64().unwrap(),
+        );
+        assert!(error > 0.0 && error < 0.5 * baseline, "{j}");
+        assert!(j["bases"].as_u64().unwrap() >= 1 && j["cpu_seconds"].as_f64().unwrap() > 0.0);
+    }
+    assert_eq!(
+        maps.iter().filter(|j| j["model"] == "kulla-conty").count(),
+        2
+    );
 }

@@ -4,6 +4,7 @@
 //! | job | what is timed | skip |
 //! | --- | --- | --- |
 //! | `render` | [`render_all`] of the records of a capture template (built once, 1 sample per pixel, no targets) with the template's material under each model; after one untimed render, the median of repeated renders until [`RenderTiming::min_seconds`] have passed | `false`: every pixel, exactly; `true`: only the pixels that enter a loss (weight > 0), through the [`RenderPlan`] a fit would use (the skips `--no-skip` leaves on); `rel_error_vs_exact` is the RMS difference from the exact render relative to its RMS |
+//! | `maps-fit` | a maps fit ([`crate::maps::fit`]) of each model to a photo set at each texel grid, leaving the last photo out: wall and CPU seconds of the fit and the prediction of every photo, the held-out photo's relative error and the naive baseline (the mean of the other photos); `seconds_vs_single` against the `single` maps fit of the same set and grid | none (a maps fit evaluates each pixel at its centre, exactly) |
 //! | `fit` | [`fit_model`] of each model to a photo set (records built once, optionally halved in resolution `halvings` times); the final loss and `alpha_rel_error = (alpha - alpha_true) / alpha_true` against the set's `material.json` | `false`: `--no-skip all`; `true`: every skip of [`crate::render::plan`] that `--no-skip` leaves on (pixels of weight 0 are never rendered by a fit) |
 //!
 //! `skipped_pixels` says how many pixels of weight 0 were left out; `plan` what the render
@@ -14,6 +15,8 @@ use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::Result;
 use crate::fit::{fit_model, FitOptions};
+use crate::maps::fit::HeldOutPhoto;
+use crate::maps::TexelGrid;
 use crate::material::Material;
 use crate::render::plan::{PlanSummary, RenderPlan, Skips};
 use crate::render::{render_all, render_material};
@@ -28,6 +31,7 @@ use std::time::Instant;
 pub enum JobKind {
     Render,
     Fit,
+    MapsFit,
 }
 
 /// One row of the job table (the `--json` contract of issue #5 plus context).
@@ -61,8 +65,15 @@ pub struct JobRow {
     pub rel_error_vs_exact: Option<f64>,
     /// Fits: the photo set.
     pub set: Option<String>,
-    /// Fits: `seconds` over the `single` fit of the same set with the same `skip`.
+    /// Fits: `seconds` over the `single` fit of the same set with the same `skip` (maps fits:
+    /// of the same set and texel grid).
     pub seconds_vs_single: Option<f64>,
+    /// Maps fits: the texel grid, the number of bases chosen, and the held-out photo's
+    /// relative error and its naive baseline (the mean of the other photos).
+    pub texels: Option<[usize; 2]>,
+    pub bases: Option<usize>,
+    pub held_out_error: Option<f64>,
+    pub held_out_baseline: Option<f64>,
 }
 
 impl JobRow {
@@ -95,6 +106,32 @@ impl JobRow {
             rel_error_vs_exact: None,
             set: None,
             seconds_vs_single: None,
+            texels: None,
+            bases: None,
+            held_out_error: None,
+            held_out_baseline: None,
+        }
+    }
+
+    /// The row of a maps fit of `model` to `records` on `grid` that took `seconds` wall and
+    /// `cpu_seconds` CPU, with its held-out photo's prediction.
+    pub fn maps_fit(
+        model: Model,
+        records: &ShadingRecords,
+        (grid, bases): (TexelGrid, usize),
+        (seconds, cpu_seconds): (f64, f64),
+        held_out: Option<&HeldOutPhoto>,
+    ) -> JobRow {
+        let used = records.weight.iter().filter(|&&w| w > 0.0).count();
+        JobRow {
+            seconds,
+            cpu_seconds,
+            repeats: 1,
+            texels: Some([grid.width, grid.height]),
+            bases: Some(bases),
+            held_out_error: held_out.map(|h| h.relative_error),
+            held_out_baseline: held_out.and_then(|h| h.mean_photo_error),
+            ..JobRow::new(JobKind::MapsFit, model, false, records, used)
         }
     }
 }
@@ -218,15 +255,24 @@ pub fn relative_rms_difference(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
 }
 
 /// Set `seconds_vs_single` of the fit rows of one set: each row's time over the `single` row
-/// with the same `skip` (left `None` when `single` was not fitted).
+/// of the same job with the same `skip` and texel grid (left `None` when `single` was not
+/// fitted).
 pub fn ratios_to_single(rows: &mut [JobRow]) {
-    let single = |skip: bool, rows: &[JobRow]| {
+    let single = |row: &JobRow, rows: &[JobRow]| {
         rows.iter()
-            .find(|r| r.job == JobKind::Fit && r.model == Model::Single && r.skip == skip)
+            .find(|r| {
+                r.job == row.job
+                    && r.model == Model::Single
+                    && r.skip == row.skip
+                    && r.texels == row.texels
+            })
             .map(|r| r.seconds)
     };
     for i in 0..rows.len() {
-        if let Some(base) = single(rows[i].skip, rows) {
+        if rows[i].job == JobKind::Render {
+            continue;
+        }
+        if let Some(base) = single(&rows[i], rows) {
             rows[i].seconds_vs_single = Some(rows[i].seconds / base);
         }
     }

@@ -2,15 +2,16 @@
 //! `{"estimators": [...], "jobs": [...], ...}`), and with `-o DIR` a folder holding
 //! `bench.json`, `bench.txt` (the tables) and `bench.png` (error against run time).
 //!
-//! | run | converged values | render job | fit jobs |
-//! | --- | --- | --- | --- |
-//! | full | 100000 samples | 9 photos at 256x256, repeated for 1 s | each set of `--fit-sets` at full resolution, every model |
-//! | `--quick` | 4096 samples | 9 photos at 128x128, once | each set halved 4 times, every model |
+//! | run | converged values | render job | fit jobs | maps fit jobs |
+//! | --- | --- | --- | --- | --- |
+//! | full | 100000 samples | 9 photos at 256x256, repeated for 1 s | each set of `--fit-sets` at full resolution, every model | each set of `--maps-sets`, each of `--maps-models`, texels 64 and the photos' width, up to 4 bases |
+//! | `--quick` | 4096 samples | 9 photos at 128x128, once | each set halved 4 times, every model | `single` and `kulla-conty` at texels 32 only, up to 2 bases |
 //!
 //! The fit jobs use the options of `fit` (the same flags, e.g. `--pixel-samples`,
 //! `--max-iters`), and `--seed` seeds everything.
 
 use super::fit::FitOptionArgs;
+use super::fit_maps::{MapsArgs, MapsSet};
 use super::output::StagedFolder;
 use crate::bench::cpu_time::process_seconds;
 use crate::bench::estimators::{self, EstimatorRow, EstimatorSettings, ALPHA_RANGE};
@@ -22,12 +23,14 @@ use crate::capture::atomic_file::write_atomically;
 use crate::error::{Error, Result};
 use crate::fit::point::params::FresnelFamily;
 use crate::fit::FitOptions;
+use crate::maps::fit::check_model;
+use crate::maps::TexelGrid;
 use crate::material::Material;
 use crate::progress::Progress;
 use crate::render::plan::Skips;
 use serde::Serialize;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -71,6 +74,20 @@ pub struct BenchArgs {
     /// Halve the fit set's resolution this many times first (default 0; with --quick 4).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=8))]
     pub fit_halvings: Option<usize>,
+    /// Photo sets of the maps fit jobs (comma-separated); the last photo of each is held out.
+    #[arg(long, value_delimiter = ',', default_value = "datasets/two-materials")]
+    pub maps_sets: Vec<PathBuf>,
+    /// Models of the maps fit jobs (analytic models only; default single,kulla-conty,tabulated;
+    /// with --quick single,kulla-conty: tabulated's fit costs about three of single's).
+    #[arg(long, value_delimiter = ',')]
+    pub maps_models: Option<Vec<Model>>,
+    /// Texel grids of the maps fit jobs: square sides, or `full` for the photos' width
+    /// (default 64,full; with --quick 32).
+    #[arg(long, value_delimiter = ',')]
+    pub maps_texels: Option<Vec<TexelSide>>,
+    /// No maps fit jobs.
+    #[arg(long)]
+    pub no_maps: bool,
     #[command(flatten)]
     pub fit: FitOptionArgs,
     /// Print `{"estimators": [...], "jobs": [...], "notes": [...], ...}` instead of tables.
@@ -95,6 +112,7 @@ struct Settings {
     estimators: EstimatorSettings,
     render: Option<RenderSettings>,
     fit: Option<FitSettings>,
+    maps: Option<MapsSettings>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -128,6 +146,37 @@ impl std::str::FromStr for FitSet {
             fresnel,
         })
     }
+}
+
+/// A texel grid side of the maps fit jobs: a number of texels, or the photos' width.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TexelSide {
+    Texels(usize),
+    Full,
+}
+
+impl std::str::FromStr for TexelSide {
+    type Err = String;
+    fn from_str(text: &str) -> std::result::Result<Self, String> {
+        if text == "full" {
+            return Ok(TexelSide::Full);
+        }
+        match text.parse::<usize>() {
+            Ok(n) if (1..=8192).contains(&n) => Ok(TexelSide::Texels(n)),
+            _ => Err(format!(
+                "`{text}` is neither a texel count from 1 to 8192 nor `full`"
+            )),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+struct MapsSettings {
+    sets: Vec<PathBuf>,
+    models: Vec<Model>,
+    texels: Vec<TexelSide>,
+    max_bases: usize,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -183,6 +232,24 @@ impl BenchArgs {
                 pixel_samples: self.fit.pixel_samples,
                 max_iters: self.fit.max_iters,
             }),
+            maps: (!self.no_jobs && !self.no_maps).then(|| MapsSettings {
+                sets: self.maps_sets.clone(),
+                models: self.maps_models.clone().unwrap_or_else(|| {
+                    let mut models = vec![Model::Single, Model::KullaConty];
+                    if !quick {
+                        models.push(Model::Tabulated);
+                    }
+                    models
+                }),
+                texels: self.maps_texels.clone().unwrap_or_else(|| {
+                    if quick {
+                        vec![TexelSide::Texels(32)]
+                    } else {
+                        vec![TexelSide::Texels(64), TexelSide::Full]
+                    }
+                }),
+                max_bases: if quick { 2 } else { 4 },
+            }),
         }
     }
 }
@@ -222,6 +289,18 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
                 Ok((set, records, truth))
             })
             .collect::<Result<Vec<_>>>()?,
+        None => Vec::new(),
+    };
+    let maps_inputs = match &settings.maps {
+        Some(m) => {
+            for &model in &m.models {
+                check_model(model)?;
+            }
+            m.sets
+                .iter()
+                .map(|path| maps_set(path, &args.fit, m.max_bases))
+                .collect::<Result<Vec<_>>>()?
+        }
         None => Vec::new(),
     };
 
@@ -291,6 +370,42 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
         }
         jobs::ratios_to_single(&mut job_rows[first_row..]);
     }
+    if let Some(m) = &settings.maps {
+        for mut set in maps_inputs {
+            let first_row = job_rows.len();
+            for &side in &m.texels {
+                let width = set.records.photos[0].width;
+                let n = match side {
+                    TexelSide::Texels(n) => n,
+                    TexelSide::Full => width,
+                };
+                let height = ((n as f64 * set.capture.sample.height / set.capture.sample.width)
+                    .round() as usize)
+                    .max(1);
+                set.grid = TexelGrid { width: n, height };
+                for &model in &m.models {
+                    if !args.quiet {
+                        eprintln!(
+                            "bench: maps fit {model} to {} at {n}x{height} texels",
+                            set.capture_path.display()
+                        );
+                    }
+                    let (started, cpu) = (Instant::now(), process_seconds());
+                    let run = set.fit(model, !args.quiet)?;
+                    let mut row = JobRow::maps_fit(
+                        model,
+                        &set.records,
+                        (set.grid, run.fit.bases.len()),
+                        (started.elapsed().as_secs_f64(), process_seconds() - cpu),
+                        run.holdout.as_ref(),
+                    );
+                    row.set = Some(set.capture_path.display().to_string());
+                    job_rows.push(row);
+                }
+            }
+            jobs::ratios_to_single(&mut job_rows[first_row..]);
+        }
+    }
 
     let report = BenchReport {
         notes: notes(&settings, &estimator_rows, &job_rows),
@@ -323,6 +438,20 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
         print!("{text}");
     }
     Ok(())
+}
+
+/// A photo set of the maps fit jobs, its last photo held out, at most `max_bases` bases.
+fn maps_set(path: &Path, fit: &FitOptionArgs, max_bases: usize) -> Result<MapsSet> {
+    let capture = fit.real.open(path)?;
+    let last = capture.photos.len().saturating_sub(1);
+    let maps = MapsArgs {
+        maps: true,
+        texels: None,
+        normals: false,
+        bases: max_bases,
+        holdout_photo: Some(last),
+    };
+    MapsSet::new(path, capture, fit, &maps)
 }
 
 /// What the numbers mean and what this run left out.
@@ -381,6 +510,30 @@ fn notes(settings: &Settings, estimators: &[EstimatorRow], jobs: &[JobRow]) -> V
             f.halvings,
             f.pixel_samples,
             f.max_iters
+        ));
+    }
+    if let Some(m) = &settings.maps {
+        notes.push(format!(
+            "maps-fit: {} with {} at texels {}, up to {} bases, the last photo of each set held out; seconds: wall time of the fit and the prediction of every photo (cpu: all threads); held-out: relative RMS error of the held-out photo, baseline: that of predicting it by the mean of the other photos; /single: over the single maps fit of the same set and texels",
+            m.sets
+                .iter()
+                .map(|s| s.display().to_string())
+                .collect::<Vec<_>>()
+                .join(" and "),
+            m.models
+                .iter()
+                .map(|m| m.name())
+                .collect::<Vec<_>>()
+                .join(", "),
+            m.texels
+                .iter()
+                .map(|t| match t {
+                    TexelSide::Texels(n) => n.to_string(),
+                    TexelSide::Full => "full (the photos' width)".into(),
+                })
+                .collect::<Vec<_>>()
+                .join(", "),
+            m.max_bases
         ));
     }
     notes
@@ -451,7 +604,7 @@ fn tables(report: &BenchReport) -> String {
         "\nkernel: single (GGX copper, alpha 0.3) over {} pairs, one thread: scalar {:.1} ns/eval, batch {:.2} ns/eval ({:.1}x; preparing the batch's geometry once: {:.1} ns/pair)\n",
         k.pairs, k.scalar_ns_per_eval, k.batch_ns_per_eval, k.speedup, k.batch_prepare_ns_per_eval
     );
-    if !report.jobs.is_empty() {
+    if report.jobs.iter().any(|j| j.job != jobs::JobKind::MapsFit) {
         out += &format!(
             "\n{:<7} {:<12} {:>5} {:>9} {:>9} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6} {:>7}\n",
             "job",
@@ -471,7 +624,11 @@ fn tables(report: &BenchReport) -> String {
             "evals",
             "/single"
         );
-        for j in &report.jobs {
+        for j in report
+            .jobs
+            .iter()
+            .filter(|j| j.job != jobs::JobKind::MapsFit)
+        {
             out += &format!(
                 "{:<7} {:<12} {:>5} {:>9.4} {:>9.3} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6} {:>7}\n",
                 if j.job == jobs::JobKind::Render { "render" } else { "fit" },
@@ -490,6 +647,44 @@ fn tables(report: &BenchReport) -> String {
                 j.alpha_rel_error.map_or("-".into(), |e| format!("{:+.2}%", 100.0 * e)),
                 j.evaluations.map_or("-".into(), |e| e.to_string()),
                 j.seconds_vs_single.map_or("-".into(), |r| format!("{r:.2}x")),
+            );
+        }
+    }
+    let maps: Vec<&JobRow> = report
+        .jobs
+        .iter()
+        .filter(|j| j.job == jobs::JobKind::MapsFit)
+        .collect();
+    if !maps.is_empty() {
+        out += &format!(
+            "\n{:<8} {:<12} {:>11} {:>9} {:>9} {:>7} {:>5} {:>9} {:>9}  {}\n",
+            "job",
+            "model",
+            "texels",
+            "seconds",
+            "cpu s",
+            "/single",
+            "bases",
+            "held-out",
+            "baseline",
+            "set"
+        );
+        for j in maps {
+            let [w, h] = j.texels.unwrap_or_default();
+            out += &format!(
+                "{:<8} {:<12} {:>11} {:>9.2} {:>9.2} {:>7} {:>5} {:>9} {:>9}  {}\n",
+                "maps-fit",
+                j.model.name(),
+                format!("{w}x{h}"),
+                j.seconds,
+                j.cpu_seconds,
+                j.seconds_vs_single
+                    .map_or("-".into(), |r| format!("{r:.2}x")),
+                j.bases.map_or("-".into(), |b| b.to_string()),
+                j.held_out_error.map_or("-".into(), |e| format!("{e:.4}")),
+                j.held_out_baseline
+                    .map_or("-".into(), |e| format!("{e:.4}")),
+                j.set.as_deref().unwrap_or("-"),
             );
         }
     }

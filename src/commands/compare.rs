@@ -10,10 +10,12 @@
 //! | `--mcmc` and its options | one sampler run over all models with jumps between them (as `fit --mcmc`): each row gains its posterior probability and 95% intervals, and `posterior.png` is drawn; checkpoint `<REPORT_DIR>.mcmc-checkpoint.json` |
 //! | fit options | as `fit` ([`FitOptionArgs`]) |
 //! | `-o REPORT_DIR` | staged and renamed into place; an existing non-empty folder needs `--force` |
+//! | `--maps` and its options (`--texels`, `--normals`, `--bases`, `--holdout-photo N`) | fit each model as material maps ([`super::fit_maps`]) and write the maps report ([`crate::report::maps`]): the maps side by side, re-renders and residuals of every photo, the held-out photo's error, and each multi-bounce model minus `single` per texel and per basis material. `--holdout K` and `--mcmc` are refused (a maps fit holds out one photo) |
 
 use super::fit::{
     fit_and_sample, load_records, select, FitFile, FitOptionArgs, McmcArgs, RegionReport,
 };
+use super::fit_maps::{MapsArgs, MapsRun, MapsSet};
 use super::images::display_exposure;
 use super::output::StagedFolder;
 use crate::bsdf::Model;
@@ -21,9 +23,15 @@ use crate::capture::atomic_file::write_atomically;
 use crate::error::{Error, Result};
 use crate::fit::bayes::holdout::{check_fold_count, cross_validate};
 use crate::fit::bayes::selection::{HeldOutErrors, HeldOutRanking};
+use crate::maps::compare::MapsDifference;
+use crate::maps::fit::check_model;
 use crate::render::render_all;
 use crate::report::images::{residual_scale, write_model_images};
-use crate::report::{html, markdown, plots, HeldOut, ModelRow, Report};
+use crate::report::maps::{
+    write_difference_images, write_maps_image, DifferenceRow, MapsModelRow, MapsReport,
+};
+use crate::report::{html, markdown, plots, HeldOut, ModelRow, Page, Report};
+use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -51,6 +59,8 @@ pub struct CompareArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub mcmc: McmcArgs,
+    #[command(flatten)]
+    pub maps: MapsArgs,
 }
 
 /// `--holdout`: K folds, or one fold per photo.
@@ -77,6 +87,9 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
                 format!("{model} is listed twice"),
             ));
         }
+    }
+    if args.maps.maps {
+        return run_maps_compare(args);
     }
     let capture = args.options.real.open(&args.capture)?;
     let holdout = args.holdout.map(|h| match h {
@@ -176,12 +189,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
     write_report(&report, &root)?;
     folder.commit()?;
     done.remove_checkpoint()?;
-    if !args.quiet {
-        for verdict in &report.verdicts {
-            eprintln!("{verdict}");
-        }
-    }
-    println!("{}", args.output.display());
+    done_message(args, &report.verdicts);
     Ok(())
 }
 
@@ -196,6 +204,11 @@ fn write_report(report: &Report, root: &Path) -> Result<()> {
     if !posteriors.is_empty() {
         plots::posterior_intervals(&root.join(crate::report::POSTERIOR_PLOT), &posteriors)?;
     }
+    write_pages(report, root)
+}
+
+/// `report.json`, `report.md` and `report.html` of `page` under `root` (its images are there).
+fn write_pages<P: Page + Serialize>(page: &P, root: &Path) -> Result<()> {
     let write_text = |name: &str, text: &str| {
         let path = root.join(name);
         write_atomically(&path, |w| {
@@ -204,8 +217,103 @@ fn write_report(report: &Report, root: &Path) -> Result<()> {
         })
     };
     let json =
-        serde_json::to_string_pretty(report).map_err(|e| Error::io(root.join("report.json"), e))?;
+        serde_json::to_string_pretty(page).map_err(|e| Error::io(root.join("report.json"), e))?;
     write_text("report.json", &json)?;
-    write_text("report.md", &markdown::render(report))?;
-    write_text("report.html", &html::render(report, root)?)
+    write_text("report.md", &markdown::render(page))?;
+    write_text("report.html", &html::render(page, root)?)
+}
+
+/// `compare --maps`: every model's maps fit of the same photos, and the maps report.
+fn run_maps_compare(args: &CompareArgs) -> Result<()> {
+    if args.holdout.is_some() {
+        return Err(Error::argument(
+            "--holdout",
+            "a maps comparison holds out one photo: use --holdout-photo N",
+        ));
+    }
+    if args.mcmc.mcmc {
+        return Err(Error::argument(
+            "--mcmc",
+            "a maps comparison has no posterior sampler; leave out --mcmc",
+        ));
+    }
+    for &model in &args.models {
+        check_model(model)?;
+    }
+    let capture = args.options.real.open(&args.capture)?;
+    let folder = StagedFolder::new(&args.output, args.force)?;
+    let set = MapsSet::new(&args.capture, capture, &args.options, &args.maps)?;
+    let mut runs: Vec<MapsRun> = Vec::new();
+    for &model in &args.models {
+        if !args.quiet {
+            eprintln!("{model}: maps fit");
+        }
+        runs.push(set.fit(model, !args.quiet)?);
+    }
+
+    let root = folder.path("");
+    let predictions: Vec<Vec<[f64; 3]>> = runs.iter().map(|r| r.predicted.clone()).collect();
+    let display = display_exposure(&set.records.target);
+    let scale = residual_scale(&set.records, &predictions);
+    let mut rows = Vec::new();
+    for run in &runs {
+        let model = run.model;
+        let model_folder = root.join(model.name());
+        std::fs::create_dir(&model_folder).map_err(|e| Error::io(&model_folder, e))?;
+        write_model_images(&root, model, &run.records, &run.predicted, display, scale)?;
+        let fit_file = model_folder.join("fit.json");
+        run.fit.maps.save(&fit_file, set.fit_file_fields(run))?;
+        rows.push(MapsModelRow {
+            model,
+            seconds: run.fit.seconds,
+            train_error: run.fit.train_error,
+            holdout: run.holdout.clone(),
+            exposure: run.exposure,
+            fit_file: format!("{model}/fit.json"),
+            maps_fit: run.fit.clone(),
+        });
+    }
+    let fits: Vec<_> = runs.iter().map(|r| (r.model, &r.fit.maps)).collect();
+    let maps_image = write_maps_image(&root, &fits)?;
+    let mut differences = Vec::new();
+    if let Some(single) = runs.iter().find(|r| r.model == Model::Single) {
+        for run in runs.iter().filter(|r| r.model != Model::Single) {
+            let (difference, deltas) = MapsDifference::new(
+                (run.model, &run.fit.maps),
+                &single.fit.maps,
+                &run.fit.labels,
+                &run.fit.bases,
+            );
+            let images = write_difference_images(&root, &difference, &deltas, set.grid)?;
+            differences.push(DifferenceRow { difference, images });
+        }
+    }
+    let report = MapsReport {
+        kind: "maps",
+        capture: args.capture.display().to_string(),
+        capture_name: set.capture.name.clone(),
+        photos: set.records.photos.iter().map(|p| p.stem.clone()).collect(),
+        pixels_used: set.records.weight.iter().filter(|w| **w > 0.0).count(),
+        texels: [set.grid.width, set.grid.height],
+        holdout_photo: args.maps.holdout_photo,
+        verdicts: MapsReport::verdicts(&rows, &differences),
+        models: rows,
+        maps_image,
+        differences,
+        residual_scale: scale,
+    };
+    write_pages(&report, &root)?;
+    folder.commit()?;
+    done_message(args, &report.verdicts);
+    Ok(())
+}
+
+/// The verdicts on stderr (unless `--quiet`) and the report folder on stdout.
+fn done_message(args: &CompareArgs, verdicts: &[String]) {
+    if !args.quiet {
+        for verdict in verdicts {
+            eprintln!("{verdict}");
+        }
+    }
+    println!("{}", args.output.display());
 }

@@ -6,15 +6,17 @@
 use super::fit::{load_records, residuals, FitArgs, FitOptionArgs};
 use super::images::{display_exposure, write_photo_images};
 use super::output::{check_overwrite, StagedFolder};
+use crate::bsdf::Model;
+use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::fit_model;
 use crate::fit::point::exposure::exposed_records;
-use crate::maps::fit::{fit_maps, relative_error, MapsFit, MapsFitOptions};
+use crate::maps::fit::{fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions};
 use crate::maps::render::render_maps;
 use crate::maps::{MaterialMaps, TexelGrid};
 use crate::shading::{PhotoSpan, ShadingRecords};
 use serde_json::json;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The options of `fit --maps`.
 #[derive(clap::Args, Debug, Clone)]
@@ -59,18 +61,13 @@ fn parse_texels(text: &str) -> std::result::Result<TexelGrid, String> {
 }
 
 pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
-    // One sub-sample per pixel, its centre: each pixel then sees exactly one texel.
-    let options = &FitOptionArgs {
-        pixel_samples: 1,
-        ..args.options.clone()
-    };
     let [model] = args.models.as_slice() else {
         return Err(Error::argument(
             "--models",
             "a maps fit takes one model (compare maps of several with `compare --maps`)",
         ));
     };
-    let capture = options.real.open(&args.capture)?;
+    let capture = args.options.real.open(&args.capture)?;
     let output = args
         .output
         .clone()
@@ -78,121 +75,213 @@ pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
     check_overwrite(&output, args.force)?;
     let maps_folder = StagedFolder::new(&MaterialMaps::folder_beside(&output), args.force)?;
     let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
-    let grid = args.map_options.texels.unwrap_or_else(|| {
-        let width = capture.photos[0].camera.resolution()[0];
-        let height = (width as f64 * capture.sample.height / capture.sample.width).round();
-        TexelGrid {
-            width,
-            height: (height as usize).max(1),
-        }
-    });
-    let (records, _) = load_records(&args.capture, &capture, options)?;
-    let photos = records.photos.len();
-    if let Some(h) = args.map_options.holdout_photo.filter(|&h| h >= photos) {
-        return Err(Error::argument(
-            "--holdout-photo",
-            format!(
-                "photo {h} does not exist; the set has photos 0 to {}",
-                photos - 1
-            ),
-        ));
-    }
-    if photos < 2 + usize::from(args.map_options.holdout_photo.is_some()) {
-        return Err(Error::invalid(
-            &args.capture,
-            "photos",
-            "a maps fit needs at least two photos to fit (and one more to hold out)",
-        ));
-    }
-    // A fitted exposure comes from the uniform fit of the same photos (with the known Fresnel):
-    // the maps' per-texel albedo would absorb it otherwise.
-    let exposure = if options.real.fit_exposure {
-        options
-            .space(*model)
-            .check()
-            .map_err(|m| Error::argument("--fit-exposure", m))?;
-        let uniform = fit_model(&records, &options.fit_options(*model, !args.quiet))?;
-        uniform.exposure.as_ref().map_or(1.0, |e| e.value)
-    } else {
-        1.0
-    };
-    let records = exposed_records(&records, exposure).into_owned();
-    let holdout = args.map_options.holdout_photo;
-    let training = match holdout {
-        Some(h) => records.restricted_to_photos(|i| i != h),
-        None => records.clone(),
-    };
-    let validation_photo = (0..photos).rev().find(|&i| Some(i) != holdout);
-    let fit = fit_maps(
-        &training,
-        &MapsFitOptions {
-            model: *model,
-            ndf: options.ndf,
-            height: options.height,
-            known_fresnel: options.real.fresnel_known,
-            grid,
-            normals: args.map_options.normals,
-            max_bases: args.map_options.bases,
-            validation_photo,
-            progress: !args.quiet,
-        },
-    )?;
-    let all: Vec<usize> = (0..records.pixel_count()).collect();
-    let predicted = render_maps(&fit.maps, &records, &all, options.seed)?;
-    let holdout_report = holdout.map(|h| {
-        let pixels: Vec<usize> = records.photos[h]
-            .pixels()
-            .filter(|&p| records.weight[p] > 0.0)
-            .collect();
-        let values: Vec<[f64; 3]> = pixels.iter().map(|&p| predicted[p]).collect();
-        json!({"photo": h, "stem": records.photos[h].stem,
-               "relative_error": relative_error(&values, &records, &pixels),
-               "mean_photo_error": mean_photo_error(&records, h)})
-    });
+    let set = MapsSet::new(&args.capture, capture, &args.options, &args.map_options)?;
+    let run = set.fit(*model, !args.quiet)?;
     if !args.quiet {
-        summarise(&fit, holdout_report.as_ref());
+        summarise(&run.fit, run.holdout.as_ref());
     }
-    let residual = residuals(&predicted, &records);
-    let display = display_exposure(&records.target);
-    write_photo_images(&residual_folder.path(""), &records, &residual, display, "")?;
+    let residual = residuals(&run.predicted, &run.records);
+    let display = display_exposure(&run.records.target);
+    write_photo_images(
+        &residual_folder.path(""),
+        &run.records,
+        &residual,
+        display,
+        "",
+    )?;
     let folder_name = MaterialMaps::folder_beside(&output);
     let prefix = folder_name
         .file_name()
         .unwrap_or_default()
         .to_string_lossy();
-    let maps_entry = fit.maps.write_images(&maps_folder.path(""), &prefix)?;
-    let mut extra = serde_json::Map::new();
-    extra.insert(
-        "maps_fit".into(),
-        serde_json::to_value(&fit).expect("serialisable"),
-    );
-    extra.insert("texels".into(), json!([grid.width, grid.height]));
-    if let Some(report) = holdout_report {
-        extra.insert("holdout".into(), report);
-    }
-    if options.real.fit_exposure {
-        extra.insert("exposure".into(), json!({"value": exposure}));
-    }
-    extra.insert("capture".into(), json!(args.capture.display().to_string()));
-    extra.insert("capture_name".into(), json!(capture.name));
-    extra.insert("pixel_samples".into(), json!(options.pixel_samples));
-    extra.insert(
-        "excluded".into(),
-        serde_json::to_value(records.excluded).expect("serialisable"),
-    );
-    extra.insert("seed".into(), json!(options.seed));
-    extra.insert("version".into(), json!(env!("CARGO_PKG_VERSION")));
+    let maps_entry = run.fit.maps.write_images(&maps_folder.path(""), &prefix)?;
     maps_folder.commit()?;
     residual_folder.commit()?;
-    fit.maps.save_json(&output, maps_entry, extra)?;
+    run.fit
+        .maps
+        .save_json(&output, maps_entry, set.fit_file_fields(&run))?;
     println!("{}", output.display());
     Ok(())
+}
+
+/// A photo set prepared for maps fits, with what every model's fit of it shares (`fit --maps`
+/// fits one model, `compare --maps` several, `bench` times them): the records (one centre
+/// sub-sample per pixel), the texel grid and the options.
+pub struct MapsSet {
+    pub capture_path: PathBuf,
+    pub capture: Capture,
+    /// Records before any fitted exposure.
+    pub records: ShadingRecords,
+    pub grid: TexelGrid,
+    /// The fit options, with one sub-sample per pixel.
+    pub options: FitOptionArgs,
+    pub maps: MapsArgs,
+}
+
+/// One model's maps fit of a [`MapsSet`].
+pub struct MapsRun {
+    pub model: Model,
+    pub fit: MapsFit,
+    /// The exposure fitted with `--fit-exposure`.
+    pub exposure: Option<f64>,
+    /// The set's records under that exposure.
+    pub records: ShadingRecords,
+    /// The maps' radiance at every pixel of every photo, the held-out one included.
+    pub predicted: Vec<[f64; 3]>,
+    pub holdout: Option<HeldOutPhoto>,
+}
+
+impl MapsSet {
+    /// Loads the records of `capture` and checks the maps options against it (the held-out
+    /// photo exists, enough photos remain to fit); nothing is fitted yet.
+    pub fn new(
+        capture_path: &Path,
+        capture: Capture,
+        options: &FitOptionArgs,
+        maps: &MapsArgs,
+    ) -> Result<MapsSet> {
+        // One sub-sample per pixel, its centre: each pixel then sees exactly one texel.
+        let options = FitOptionArgs {
+            pixel_samples: 1,
+            ..options.clone()
+        };
+        let grid = maps.texels.unwrap_or_else(|| {
+            let width = capture.photos[0].camera.resolution()[0];
+            let height = (width as f64 * capture.sample.height / capture.sample.width).round();
+            TexelGrid {
+                width,
+                height: (height as usize).max(1),
+            }
+        });
+        let (records, _) = load_records(capture_path, &capture, &options)?;
+        let photos = records.photos.len();
+        if let Some(h) = maps.holdout_photo.filter(|&h| h >= photos) {
+            return Err(Error::argument(
+                "--holdout-photo",
+                format!(
+                    "photo {h} does not exist; the set has photos 0 to {}",
+                    photos - 1
+                ),
+            ));
+        }
+        if photos < 2 + usize::from(maps.holdout_photo.is_some()) {
+            return Err(Error::invalid(
+                capture_path,
+                "photos",
+                "a maps fit needs at least two photos to fit (and one more to hold out)",
+            ));
+        }
+        Ok(MapsSet {
+            capture_path: capture_path.to_path_buf(),
+            capture,
+            records,
+            grid,
+            options,
+            maps: maps.clone(),
+        })
+    }
+
+    /// Fits maps of `model` to the photos (all but the held-out one) and predicts every photo.
+    pub fn fit(&self, model: Model, progress: bool) -> Result<MapsRun> {
+        let options = &self.options;
+        // A fitted exposure comes from the uniform fit of the same photos (with the known
+        // Fresnel): the maps' per-texel albedo would absorb it otherwise.
+        let exposure = if options.real.fit_exposure {
+            options
+                .space(model)
+                .check()
+                .map_err(|m| Error::argument("--fit-exposure", m))?;
+            let uniform = fit_model(&self.records, &options.fit_options(model, progress))?;
+            Some(uniform.exposure.as_ref().map_or(1.0, |e| e.value))
+        } else {
+            None
+        };
+        let records = exposed_records(&self.records, exposure.unwrap_or(1.0)).into_owned();
+        let photos = records.photos.len();
+        let holdout = self.maps.holdout_photo;
+        let training = match holdout {
+            Some(h) => records.restricted_to_photos(|i| i != h),
+            None => records.clone(),
+        };
+        let validation_photo = (0..photos).rev().find(|&i| Some(i) != holdout);
+        let fit = fit_maps(
+            &training,
+            &MapsFitOptions {
+                model,
+                ndf: options.ndf,
+                height: options.height,
+                known_fresnel: options.real.fresnel_known,
+                grid: self.grid,
+                normals: self.maps.normals,
+                max_bases: self.maps.bases,
+                validation_photo,
+                progress,
+            },
+        )?;
+        let all: Vec<usize> = (0..records.pixel_count()).collect();
+        let predicted = render_maps(&fit.maps, &records, &all, options.seed)?;
+        let holdout = holdout.map(|h| {
+            let pixels: Vec<usize> = records.photos[h]
+                .pixels()
+                .filter(|&p| records.weight[p] > 0.0)
+                .collect();
+            let values: Vec<[f64; 3]> = pixels.iter().map(|&p| predicted[p]).collect();
+            HeldOutPhoto {
+                photo: h,
+                stem: records.photos[h].stem.clone(),
+                relative_error: relative_error(&values, &records, &pixels),
+                mean_photo_error: mean_photo_error(&records, h),
+            }
+        });
+        Ok(MapsRun {
+            model,
+            fit,
+            exposure,
+            records,
+            predicted,
+            holdout,
+        })
+    }
+
+    /// The fields a maps fit file adds to the material (`maps_fit`, `texels`, `holdout`,
+    /// `exposure`, the capture's).
+    pub fn fit_file_fields(&self, run: &MapsRun) -> serde_json::Map<String, serde_json::Value> {
+        let grid = self.grid;
+        let mut extra = serde_json::Map::new();
+        extra.insert(
+            "maps_fit".into(),
+            serde_json::to_value(&run.fit).expect("serialisable"),
+        );
+        extra.insert("texels".into(), json!([grid.width, grid.height]));
+        if let Some(report) = &run.holdout {
+            extra.insert(
+                "holdout".into(),
+                serde_json::to_value(report).expect("serialisable"),
+            );
+        }
+        if let Some(exposure) = run.exposure {
+            extra.insert("exposure".into(), json!({"value": exposure}));
+        }
+        extra.insert(
+            "capture".into(),
+            json!(self.capture_path.display().to_string()),
+        );
+        extra.insert("capture_name".into(), json!(self.capture.name));
+        extra.insert("pixel_samples".into(), json!(self.options.pixel_samples));
+        extra.insert(
+            "excluded".into(),
+            serde_json::to_value(run.records.excluded).expect("serialisable"),
+        );
+        extra.insert("seed".into(), json!(self.options.seed));
+        extra.insert("version".into(), json!(env!("CARGO_PKG_VERSION")));
+        extra
+    }
 }
 
 /// The naive baseline of a held-out photo: the relative error of predicting it by the mean of
 /// the other photos at the same pixel (rectified photos of one size; `null` otherwise), over
 /// the pixels usable in all of them.
-fn mean_photo_error(records: &ShadingRecords, held_out: usize) -> Option<f64> {
+pub fn mean_photo_error(records: &ShadingRecords, held_out: usize) -> Option<f64> {
     let span = &records.photos[held_out];
     let others: Vec<&PhotoSpan> = (0..records.photos.len())
         .filter(|&i| i != held_out)
@@ -228,7 +317,7 @@ fn mean_photo_error(records: &ShadingRecords, held_out: usize) -> Option<f64> {
 }
 
 /// One line per stage for stderr.
-fn summarise(fit: &MapsFit, holdout: Option<&serde_json::Value>) {
+fn summarise(fit: &MapsFit, holdout: Option<&HeldOutPhoto>) {
     for trial in &fit.basis_trials {
         eprintln!(
             "{} bases: validation photo relative error {:.4}",
@@ -250,8 +339,11 @@ fn summarise(fit: &MapsFit, holdout: Option<&serde_json::Value>) {
     );
     if let Some(h) = holdout {
         eprintln!(
-            "held-out photo {}: relative error {:.4} (mean of the other photos: {:.4})",
-            h["photo"], h["relative_error"], h["mean_photo_error"]
+            "held-out photo {}: relative error {:.4} (mean of the other photos: {})",
+            h.photo,
+            h.relative_error,
+            h.mean_photo_error
+                .map_or("n/a".into(), |e| format!("{e:.4}"))
         );
     }
 }

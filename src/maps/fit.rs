@@ -133,6 +133,23 @@ pub struct MapsFit {
     /// Texels seen by at least one loss pixel.
     pub texels_seen: usize,
     pub seconds: f64,
+    /// The basis (index into `bases`) of every texel, row-major over the texel grid: where
+    /// each material lies on the sample (`compare --maps` reports differences per basis).
+    #[serde(skip)]
+    pub labels: Vec<usize>,
+}
+
+/// The prediction of a photo left out of a maps fit (`--holdout-photo`): the fit file's and
+/// the maps comparison's `holdout`.
+#[derive(Clone, Debug, Serialize)]
+pub struct HeldOutPhoto {
+    pub photo: usize,
+    pub stem: String,
+    /// Relative RMS error of the maps' prediction of the photo ([`relative_error`]).
+    pub relative_error: f64,
+    /// The naive baseline: the relative error of predicting it by the mean of the other photos
+    /// at each pixel (`None` when the photos differ in size).
+    pub mean_photo_error: Option<f64>,
 }
 
 /// The pixels of each texel (compressed rows): pixels with loss weight > 0, by the texel their
@@ -527,27 +544,33 @@ impl TexelModel<'_> {
     }
 }
 
-/// Fits maps to `records` (built with targets, from a capture: texture coordinates needed).
-pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<MapsFit> {
-    let start = Instant::now();
+/// Refuses the models a maps fit does not take (the stochastic estimators, see the module
+/// documentation), with the reason.
+pub fn check_model(model: Model) -> Result<()> {
     let probe = Material {
-        model: options.model,
-        ndf: options.ndf,
-        height: options.height,
+        model,
         alpha: [GENERIC_ALPHA; 2],
         fresnel: FresnelSpec::White,
         diffuse: [0.0; 3],
+        ndf: Default::default(),
+        height: Default::default(),
     };
     if probe.brdf().is_stochastic() {
         return Err(Error::argument(
             "--models",
             format!(
-                "{} is stochastic: a maps fit would give each texel a noisy objective from a \
-                 few dozen records; maps fits take single, fast-msx, kulla-conty, turquin or tabulated",
-                options.model
+                "{model} is stochastic: a maps fit would give each texel a noisy objective from a \
+                 few dozen records; maps fits take single, fast-msx, kulla-conty, turquin or tabulated"
             ),
         ));
     }
+    Ok(())
+}
+
+/// Fits maps to `records` (built with targets, from a capture: texture coordinates needed).
+pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<MapsFit> {
+    let start = Instant::now();
+    check_model(options.model)?;
     if records.uv.len() != records.wi.len() {
         return Err(Error::argument(
             "--maps",
@@ -640,6 +663,7 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
             .filter(|&t| !blocks.of(t).is_empty())
             .count(),
         seconds: start.elapsed().as_secs_f64(),
+        labels: fits.labels,
     })
 }
 
@@ -694,6 +718,7 @@ fn independent_texels(model: &TexelModel, blocks: &TexelBlocks) -> Independent {
 struct BasisFits {
     texels: Vec<TexelFit>,
     bases: Vec<Basis>,
+    labels: Vec<usize>,
 }
 
 fn basis_fits(
@@ -765,7 +790,11 @@ fn basis_fits(
             share: clusters.assignment.iter().filter(|&&a| a == c).count() as f64 / total,
         })
         .collect();
-    BasisFits { texels, bases }
+    BasisFits {
+        texels,
+        bases,
+        labels: clusters.assignment,
+    }
 }
 
 /// Labels of the texels from each texel's posterior cost under each basis (`candidates`,

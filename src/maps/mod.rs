@@ -23,6 +23,7 @@
 //! The files (JSON plus images) are read and written by [`files`]; [`render`] evaluates maps over
 //! shading records; [`fit`] fits maps to a photo set.
 
+pub mod compare;
 pub mod files;
 pub mod fit;
 pub mod render;

@@ -1,7 +1,7 @@
 //! `report.html`: the report as one self-contained page: inline CSS, every image embedded as a
 //! base64 `data:image/png` URI, no script and no network access.
 
-use super::Report;
+use super::Page;
 use crate::error::{Error, Result};
 use base64::Engine;
 use std::path::Path;
@@ -41,8 +41,8 @@ fn image(root: &Path, relative: &str, class: &str, caption: &str) -> Result<Stri
 }
 
 /// The page of `report`, whose images have been written under `root`.
-pub fn render(report: &Report, root: &Path) -> Result<String> {
-    let title = format!("Model comparison: {}", escape(&report.capture_name));
+pub fn render(report: &dyn Page, root: &Path) -> Result<String> {
+    let title = escape(&report.title());
     let mut html = format!(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{title}</title>\
          <style>{STYLE}</style></head><body>\n<h1>{title}</h1>\n<ul>\n"
@@ -51,29 +51,34 @@ pub fn render(report: &Report, root: &Path) -> Result<String> {
         html += &format!("<li>{label}: {}</li>\n", escape(&value));
     }
     html += "</ul>\n<h2>Verdict</h2>\n<ul>\n";
-    for verdict in &report.verdicts {
+    for verdict in report.verdict_lines() {
         html += &format!("<li>{}</li>\n", escape(verdict));
     }
-    html += "</ul>\n<h2>Models</h2>\n<table>\n<tr>";
-    for heading in Report::table_header() {
-        html += &format!("<th>{}</th>", escape(heading));
-    }
-    html += "</tr>\n";
-    for cells in report.table_rows() {
-        html += "<tr>";
-        for cell in cells {
-            html += &format!("<td>{}</td>", escape(&cell));
+    html += "</ul>\n";
+    for table in report.tables() {
+        html += &format!("<h2>{}</h2>\n<table>\n<tr>", escape(&table.heading));
+        for heading in &table.header {
+            html += &format!("<th>{}</th>", escape(heading));
         }
         html += "</tr>\n";
+        for cells in &table.rows {
+            html += "<tr>";
+            for cell in cells {
+                html += &format!("<td>{}</td>", escape(cell));
+            }
+            html += "</tr>\n";
+        }
+        html += "</table>\n";
+        if let Some(note) = &table.note {
+            html += &format!("<p>{}</p>\n", escape(note));
+        }
     }
-    html += "</table>\n<p>BIC = N ln(RSS/N) + k ln N (Gaussian noise of unknown variance, \
-             N = pixels &times; 3). Delta-BIC on the Kass &amp; Raftery scale: &lt; 2 not \
-             distinguishable, 2-6 positive, 6-10 strong, &gt; 10 very strong.</p>\n<h2>Plots</h2>\n";
-    for (caption, path) in report.plots() {
+    html += "<h2>Plots</h2>\n";
+    for (caption, path) in report.figures() {
         html += &format!(
             "<figure>{}<figcaption>{}</figcaption></figure>\n",
-            image(root, path, "plot", caption)?,
-            escape(caption)
+            image(root, &path, "plot", &caption)?,
+            escape(&caption)
         );
     }
     html += "<h2>Photos</h2>\n";

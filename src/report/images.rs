@@ -45,16 +45,21 @@ pub fn diverging_colour(r: f64, scale: f64) -> [u8; 3] {
 /// The residual magnitude at [`RESIDUAL_QUANTILE`] over the loss pixels of all `predictions`
 /// (one per model): the full-colour scale of every residual image. 1 when all residuals vanish.
 pub fn residual_scale(records: &ShadingRecords, predictions: &[Vec<[f64; 3]>]) -> f64 {
-    let mut magnitudes: Vec<f64> = predictions
-        .iter()
-        .flat_map(|predicted| {
-            predicted
-                .iter()
-                .zip(&records.target)
-                .zip(&records.weight)
-                .filter(|(_, w)| **w > 0.0)
-                .map(|((p, t), _)| signed_residual(*p, *t).abs())
-        })
+    magnitude_scale(predictions.iter().flat_map(|predicted| {
+        predicted
+            .iter()
+            .zip(&records.target)
+            .zip(&records.weight)
+            .filter(|(_, w)| **w > 0.0)
+            .map(|((p, t), _)| signed_residual(*p, *t))
+    }))
+}
+
+/// The magnitude at [`RESIDUAL_QUANTILE`] of the finite non-zero `values`: the full-colour
+/// scale of a diverging image of them. 1 when all vanish.
+pub fn magnitude_scale(values: impl Iterator<Item = f64>) -> f64 {
+    let mut magnitudes: Vec<f64> = values
+        .map(f64::abs)
         .filter(|r| r.is_finite() && *r > 0.0)
         .collect();
     if magnitudes.is_empty() {

@@ -1,7 +1,7 @@
 //! `report.md`: the report as Markdown, with the images and plots linked by relative path (the
 //! folder is self-contained; `report.html` embeds the same images).
 
-use super::Report;
+use super::Page;
 
 /// Escape the characters that would break a Markdown table cell.
 fn cell(text: &str) -> String {
@@ -14,26 +14,28 @@ fn row<S: AsRef<str>>(cells: &[S]) -> String {
     format!("| {} |\n", cells.join(" | "))
 }
 
-pub fn render(report: &Report) -> String {
-    let mut md = format!("# Model comparison: {}\n\n", report.capture_name);
+pub fn render(report: &dyn Page) -> String {
+    let mut md = format!("# {}\n\n", report.title());
     for (label, value) in report.settings() {
         md += &format!("- {label}: {value}\n");
     }
     md += "\n## Verdict\n\n";
-    for verdict in &report.verdicts {
+    for verdict in report.verdict_lines() {
         md += &format!("- {verdict}\n");
     }
-    md += "\n## Models\n\n";
-    let header = Report::table_header();
-    md += &row(&header);
-    md += &row(&header.map(|_| "---"));
-    for cells in report.table_rows() {
-        md += &row(&cells);
+    for table in report.tables() {
+        md += &format!("\n## {}\n\n", table.heading);
+        md += &row(&table.header);
+        md += &row(&vec!["---"; table.header.len()]);
+        for cells in &table.rows {
+            md += &row(cells);
+        }
+        if let Some(note) = &table.note {
+            md += &format!("\n{note}\n");
+        }
     }
-    md += "\nBIC = N ln(RSS/N) + k ln N (Gaussian noise of unknown variance, N = pixels x 3). \
-           Delta-BIC on the Kass & Raftery scale: < 2 not distinguishable, 2-6 positive, \
-           6-10 strong, > 10 very strong.\n\n## Plots\n\n";
-    for (caption, path) in report.plots() {
+    md += "\n## Plots\n\n";
+    for (caption, path) in report.figures() {
         md += &format!("![{caption}]({path})\n\n");
     }
     md += "## Photos\n\n";

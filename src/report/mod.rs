@@ -9,6 +9,8 @@
 //! | `<model>/<stem>_target.png`, `_fit.png`, `_residual.png` | per model and photo | [`images`] |
 //! | `loss_curves.png`, `posterior.png` | plots | [`plots`] |
 //!
+//! `compare --maps` writes a [`maps::MapsReport`] instead, through the same pages ([`Page`]).
+//!
 //! Ranking is never by raw loss alone (Xie, Bieron, Peers & Hanrahan 2021 found multiple
 //! scattering changes fits of measured rough materials only a little): the report gives the BIC
 //! reading, the held-out error with its standard error, and with `--mcmc` the posterior model
@@ -16,6 +18,7 @@
 
 pub mod html;
 pub mod images;
+pub mod maps;
 pub mod markdown;
 pub mod plots;
 
@@ -351,6 +354,29 @@ pub fn photo_image(model: Model, stem: &str, kind: &str) -> String {
     format!("{model}/{stem}_{kind}.png")
 }
 
+/// The per-photo image grid of a comparison of `models` (see [`images`]): for each photo its
+/// stem and `(caption, relative path)` cells, the photo first and then each model's fit and
+/// residual.
+pub fn photo_grid(photos: &[String], models: &[Model]) -> Vec<(String, Vec<(String, String)>)> {
+    let Some(&first) = models.first() else {
+        return Vec::new();
+    };
+    photos
+        .iter()
+        .map(|stem| {
+            let mut cells = vec![("photo".to_string(), photo_image(first, stem, "target"))];
+            for &model in models {
+                cells.push((format!("{model} fit"), photo_image(model, stem, "fit")));
+                cells.push((
+                    format!("{model} residual"),
+                    photo_image(model, stem, "residual"),
+                ));
+            }
+            (stem.clone(), cells)
+        })
+        .collect()
+}
+
 /// The loss-curve plot, relative to the report folder.
 pub const LOSS_CURVES: &str = "loss_curves.png";
 /// The posterior plot (written only when some model has a posterior).
@@ -396,29 +422,8 @@ impl Report {
     /// The per-photo image grid: for each photo its stem and `(caption, relative path)` cells,
     /// the photo first and then each model's fit and residual.
     pub fn image_grid(&self) -> Vec<(String, Vec<(String, String)>)> {
-        let Some(first) = self.models.first() else {
-            return Vec::new();
-        };
-        self.photos
-            .iter()
-            .map(|stem| {
-                let mut cells = vec![(
-                    "photo".to_string(),
-                    photo_image(first.model, stem, "target"),
-                )];
-                for row in &self.models {
-                    cells.push((
-                        format!("{} fit", row.model),
-                        photo_image(row.model, stem, "fit"),
-                    ));
-                    cells.push((
-                        format!("{} residual", row.model),
-                        photo_image(row.model, stem, "residual"),
-                    ));
-                }
-                (stem.clone(), cells)
-            })
-            .collect()
+        let models: Vec<Model> = self.models.iter().map(|r| r.model).collect();
+        photo_grid(&self.photos, &models)
     }
 
     /// The plots written with the report, as `(caption, relative path)`.
@@ -428,5 +433,66 @@ impl Report {
             plots.push(("Posterior means and 95% intervals", POSTERIOR_PLOT));
         }
         plots
+    }
+}
+
+/// A table of a report page: a heading, column names, rows of cells, and a note below it.
+pub struct Table {
+    pub heading: String,
+    pub header: Vec<String>,
+    pub rows: Vec<Vec<String>>,
+    pub note: Option<String>,
+}
+
+/// What the Markdown and HTML pages lay out ([`markdown::render`], [`html::render`]): the
+/// uniform comparison ([`Report`]) and the maps comparison ([`maps::MapsReport`]) both.
+pub trait Page {
+    fn title(&self) -> String;
+    /// `(label, value)` pairs for the head of the page.
+    fn settings(&self) -> Vec<(&'static str, String)>;
+    fn verdict_lines(&self) -> &[String];
+    fn tables(&self) -> Vec<Table>;
+    /// Figures as `(caption, relative path)`.
+    fn figures(&self) -> Vec<(String, String)>;
+    /// Per photo: its stem and `(caption, relative path)` cells.
+    fn image_grid(&self) -> Vec<(String, Vec<(String, String)>)>;
+}
+
+impl Page for Report {
+    fn title(&self) -> String {
+        format!("Model comparison: {}", self.capture_name)
+    }
+
+    fn settings(&self) -> Vec<(&'static str, String)> {
+        Report::settings(self)
+    }
+
+    fn verdict_lines(&self) -> &[String] {
+        &self.verdicts
+    }
+
+    fn tables(&self) -> Vec<Table> {
+        vec![Table {
+            heading: "Models".into(),
+            header: Report::table_header().map(String::from).to_vec(),
+            rows: self.table_rows().into_iter().map(Vec::from).collect(),
+            note: Some(
+                "BIC = N ln(RSS/N) + k ln N (Gaussian noise of unknown variance, N = pixels x 3). \
+                 Delta-BIC on the Kass & Raftery scale: < 2 not distinguishable, 2-6 positive, \
+                 6-10 strong, > 10 very strong."
+                    .into(),
+            ),
+        }]
+    }
+
+    fn figures(&self) -> Vec<(String, String)> {
+        self.plots()
+            .into_iter()
+            .map(|(caption, path)| (caption.to_string(), path.to_string()))
+            .collect()
+    }
+
+    fn image_grid(&self) -> Vec<(String, Vec<(String, String)>)> {
+        Report::image_grid(self)
     }
 }

@@ -1,0 +1,412 @@
+//! The report of `compare --maps` (issue #17 item 3): maps fits of several models to the same
+//! photos side by side, their re-renders and residuals, the held-out photo's error, and what
+//! each multi-bounce model changes against `single` ([`crate::maps::compare`]).
+//!
+//! | file | content |
+//! | --- | --- |
+//! | `report.json` | [`MapsReport`] |
+//! | `report.md`, `report.html` | the same pages as the uniform comparison ([`super::Page`]) |
+//! | `maps.png` | one row per model (in `--models` order), one column per map ([`MapsImage`]) |
+//! | `<model>-minus-single_alpha.png`, `_diffuse.png` | per texel `alpha` and mean diffuse albedo of `model` minus `single`, on the residuals' diverging map (red: larger in `model`) with full colour at `+-alpha_scale`, `+-diffuse_scale` |
+//! | `<model>/fit.json`, `<model>/fit.maps/` | the model's maps fit file, as `fit --maps` writes it |
+//! | `<model>/<stem>_target.png`, `_fit.png`, `_residual.png` | per photo, held-out one included ([`super::images`]) |
+
+use super::images::{diverging_colour, magnitude_scale};
+use super::{photo_grid, Page, Table};
+use crate::bsdf::Model;
+use crate::capture::image_io::{linear_to_srgb, write_png_rgb8};
+use crate::error::{Error, Result};
+use crate::maps::compare::{MapsDifference, TexelDeltas};
+use crate::maps::fit::{HeldOutPhoto, MapsFit};
+use crate::maps::{MaterialMaps, TexelGrid};
+use serde::Serialize;
+use std::path::Path;
+
+/// The map comparison image, relative to the report folder.
+pub const MAPS_IMAGE: &str = "maps.png";
+/// Pixels of white between the cells of [`MAPS_IMAGE`].
+pub const GAP: usize = 2;
+/// Colour of a map a model does not have (e.g. `specular` with a known Fresnel).
+const ABSENT: [u8; 3] = [40, 40, 40];
+
+/// One model's line of the maps report.
+#[derive(Clone, Debug, Serialize)]
+pub struct MapsModelRow {
+    pub model: Model,
+    /// Wall seconds of the maps fit (as `maps_fit.seconds`).
+    pub seconds: f64,
+    /// Relative RMS error over the fitted pixels (as `maps_fit.train_error`).
+    pub train_error: f64,
+    /// The held-out photo's relative error and the naive baseline (`--holdout-photo`).
+    pub holdout: Option<HeldOutPhoto>,
+    /// The exposure fitted with `--fit-exposure`.
+    pub exposure: Option<f64>,
+    /// The model's maps fit file, relative to the report folder.
+    pub fit_file: String,
+    /// The fit's bases, basis trials, noise level, ... as the fit file's `maps_fit`.
+    pub maps_fit: MapsFit,
+}
+
+/// The layout of [`MAPS_IMAGE`]: `rows` (models) by `columns` (maps) cells of the texel grid's
+/// size, [`GAP`] pixels apart.
+#[derive(Clone, Debug, Serialize)]
+pub struct MapsImage {
+    pub path: String,
+    pub rows: Vec<Model>,
+    pub columns: Vec<&'static str>,
+    pub cell: [usize; 2],
+    pub gap: usize,
+    /// Encoding of each map in the image.
+    pub encoding: &'static str,
+}
+
+/// A difference's images and their colour scales.
+#[derive(Clone, Debug, Serialize)]
+pub struct DifferenceImages {
+    pub alpha: String,
+    pub diffuse: String,
+    /// Differences shown at full colour (the 99th percentile of their magnitudes).
+    pub alpha_scale: f64,
+    pub diffuse_scale: f64,
+}
+
+/// What a multi-bounce model changes against `single`, with its images.
+#[derive(Clone, Debug, Serialize)]
+pub struct DifferenceRow {
+    #[serde(flatten)]
+    pub difference: MapsDifference,
+    pub images: DifferenceImages,
+}
+
+/// Everything the maps report says: `report.json`. The fields shared with the uniform
+/// comparison ([`super::Report`]) keep its names and meanings.
+#[derive(Clone, Debug, Serialize)]
+pub struct MapsReport {
+    /// Always `"maps"` (the uniform report has no `kind`).
+    pub kind: &'static str,
+    pub capture: String,
+    pub capture_name: String,
+    pub photos: Vec<String>,
+    pub pixels_used: usize,
+    pub texels: [usize; 2],
+    pub holdout_photo: Option<usize>,
+    pub models: Vec<MapsModelRow>,
+    pub maps_image: MapsImage,
+    /// Each model other than `single` minus `single` (empty without `single`).
+    pub differences: Vec<DifferenceRow>,
+    pub residual_scale: f64,
+    pub verdicts: Vec<String>,
+}
+
+/// sRGB code of a linear value in [0, 1].
+fn srgb8(v: f64) -> u8 {
+    (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round() as u8
+}
+
+/// The colour of texel `t` of `map` of `maps`, as [`MapsImage::encoding`] says.
+fn map_colour(maps: &MaterialMaps, map: &str, t: usize) -> [u8; 3] {
+    match map {
+        "diffuse" => maps.diffuse.as_ref().map(|d| d[t].map(srgb8)),
+        "specular" => maps.specular.as_ref().map(|s| s[t].map(srgb8)),
+        "roughness" => maps.roughness.as_ref().map(|a| {
+            let grey = (a[t].clamp(0.0, 1.0) * 255.0).round() as u8;
+            [grey; 3]
+        }),
+        _ => maps
+            .normal
+            .as_ref()
+            .map(|n| n[t].map(|c| ((0.5 * c + 0.5).clamp(0.0, 1.0) * 255.0).round() as u8)),
+    }
+    .unwrap_or(ABSENT)
+}
+
+/// Writes [`MAPS_IMAGE`] under `root`: a row per `(model, maps)`, a column per map (`normal`
+/// only when some model has one); returns its layout.
+pub fn write_maps_image(root: &Path, fits: &[(Model, &MaterialMaps)]) -> Result<MapsImage> {
+    let grid = fits[0].1.grid;
+    let mut columns = vec!["diffuse", "specular", "roughness"];
+    if fits.iter().any(|(_, m)| m.normal.is_some()) {
+        columns.push("normal");
+    }
+    let (c, r) = (columns.len(), fits.len());
+    let width = c * grid.width + (c - 1) * GAP;
+    let height = r * grid.height + (r - 1) * GAP;
+    let mut bytes = vec![255u8; width * height * 3];
+    for (row, (_, maps)) in fits.iter().enumerate() {
+        for (column, map) in columns.iter().enumerate() {
+            for t in 0..grid.len() {
+                let x = column * (grid.width + GAP) + t % grid.width;
+                let y = row * (grid.height + GAP) + t / grid.width;
+                let i = 3 * (y * width + x);
+                bytes[i..i + 3].copy_from_slice(&map_colour(maps, map, t));
+            }
+        }
+    }
+    write_rgb8(&root.join(MAPS_IMAGE), &bytes, width, height)?;
+    Ok(MapsImage {
+        path: MAPS_IMAGE.into(),
+        rows: fits.iter().map(|(m, _)| *m).collect(),
+        columns,
+        cell: [grid.width, grid.height],
+        gap: GAP,
+        encoding: "diffuse and specular (F0): linear value as sRGB; roughness: grey level = alpha (black 0, white 1 and above); normal: (n + 1) / 2 per channel; dark grey: no such map",
+    })
+}
+
+fn write_rgb8(path: &Path, bytes: &[u8], width: usize, height: usize) -> Result<()> {
+    let size = |n: usize| u32::try_from(n).map_err(|_| Error::invalid(path, "pixels", "too large"));
+    write_png_rgb8(path, bytes, size(width)?, size(height)?)
+}
+
+/// Writes the difference images of `difference` under `root` and returns them.
+pub fn write_difference_images(
+    root: &Path,
+    difference: &MapsDifference,
+    deltas: &TexelDeltas,
+    grid: TexelGrid,
+) -> Result<DifferenceImages> {
+    let name = |what: &str| format!("{}-minus-single_{what}.png", difference.model);
+    let write = |what: &str, values: &[f64]| -> Result<(String, f64)> {
+        let scale = magnitude_scale(values.iter().copied());
+        let bytes: Vec<u8> = values
+            .iter()
+            .flat_map(|&v| diverging_colour(v, scale))
+            .collect();
+        write_rgb8(&root.join(name(what)), &bytes, grid.width, grid.height)?;
+        Ok((name(what), scale))
+    };
+    let (alpha, alpha_scale) = write("alpha", &deltas.alpha)?;
+    let (diffuse, diffuse_scale) = write("diffuse", &deltas.diffuse)?;
+    Ok(DifferenceImages {
+        alpha,
+        diffuse,
+        alpha_scale,
+        diffuse_scale,
+    })
+}
+
+impl MapsReport {
+    /// The verdict sentences: which model predicts the held-out photo best, and what each
+    /// multi-bounce model changes.
+    pub fn verdicts(models: &[MapsModelRow], differences: &[DifferenceRow]) -> Vec<String> {
+        let mut out = Vec::new();
+        let held: Vec<(Model, &HeldOutPhoto)> = models
+            .iter()
+            .filter_map(|r| r.holdout.as_ref().map(|h| (r.model, h)))
+            .collect();
+        match held
+            .iter()
+            .min_by(|a, b| a.1.relative_error.total_cmp(&b.1.relative_error))
+        {
+            Some(&(best, h)) => {
+                let all: Vec<String> = held
+                    .iter()
+                    .map(|(m, h)| format!("{m} {:.4}", h.relative_error))
+                    .collect();
+                out.push(format!(
+                    "On the held-out photo {} ({}), {best} predicts best (relative errors: {}; the mean of the other photos: {}).",
+                    h.photo,
+                    h.stem,
+                    all.join(", "),
+                    h.mean_photo_error.map_or("n/a".into(), |e| format!("{e:.4}"))
+                ));
+            }
+            None => {
+                out.push("Held-out error was not computed (run with --holdout-photo N).".into())
+            }
+        }
+        if differences.is_empty() {
+            out.push(
+                "No differences against single were computed (add single to --models).".into(),
+            );
+        }
+        out.extend(differences.iter().map(|d| d.difference.summary()));
+        out
+    }
+}
+
+impl Page for MapsReport {
+    fn title(&self) -> String {
+        format!("Maps comparison: {}", self.capture_name)
+    }
+
+    fn settings(&self) -> Vec<(&'static str, String)> {
+        vec![
+            (
+                "photo set",
+                format!("{} ({})", self.capture_name, self.capture),
+            ),
+            ("photos", self.photos.len().to_string()),
+            ("pixels in the fit", self.pixels_used.to_string()),
+            ("texels", format!("{}x{}", self.texels[0], self.texels[1])),
+            (
+                "held-out photo",
+                self.holdout_photo
+                    .map_or("none".into(), |h| format!("{h} ({})", self.photos[h])),
+            ),
+            (
+                "residual colour scale",
+                format!(
+                    "full red/blue at +-{:.3e} (fit - photo, mean over RGB)",
+                    self.residual_scale
+                ),
+            ),
+            ("maps image", self.maps_image.encoding.to_string()),
+        ]
+    }
+
+    fn verdict_lines(&self) -> &[String] {
+        &self.verdicts
+    }
+
+    fn tables(&self) -> Vec<Table> {
+        let optional = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4}"));
+        let models = Table {
+            heading: "Models".into(),
+            header: [
+                "model",
+                "held-out error",
+                "mean of other photos",
+                "training error",
+                "bases (kind alpha share)",
+                "exposure",
+                "time (s)",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows: self
+                .models
+                .iter()
+                .map(|r| {
+                    let bases: Vec<String> = r
+                        .maps_fit
+                        .bases
+                        .iter()
+                        .map(|b| format!("{:?} {:.3} {:.0}%", b.kind, b.alpha, 100.0 * b.share))
+                        .collect();
+                    vec![
+                        r.model.to_string(),
+                        optional(r.holdout.as_ref().map(|h| h.relative_error)),
+                        optional(r.holdout.as_ref().and_then(|h| h.mean_photo_error)),
+                        format!("{:.4}", r.train_error),
+                        bases.join("; ").to_lowercase(),
+                        optional(r.exposure),
+                        format!("{:.1}", r.seconds),
+                    ]
+                })
+                .collect(),
+            note: Some(
+                "Errors are relative RMS over pixels and channels, sqrt(sum (fit - photo)^2 / sum photo^2); \
+                 the mean of the other photos is the naive prediction of the held-out photo."
+                    .into(),
+            ),
+        };
+        let mut rows = Vec::new();
+        for d in &self.differences {
+            let d = &d.difference;
+            let cells = |region: String,
+                         share: f64,
+                         alpha: [f64; 2],
+                         s: [&crate::maps::compare::DeltaStats; 3],
+                         changed: f64| {
+                vec![
+                    d.model.to_string(),
+                    region,
+                    format!("{:.0}%", 100.0 * share),
+                    format!("{:.4}", alpha[1]),
+                    format!("{:.4}", alpha[0]),
+                    format!("{:+.4} [{:+.4}, {:+.4}]", s[0].mean, s[0].p05, s[0].p95),
+                    format!("{:.0}%", 100.0 * changed),
+                    format!("{:+.4}", s[1].mean),
+                    format!("{:+.4}", s[2].mean),
+                ]
+            };
+            for r in &d.regions {
+                rows.push(cells(
+                    format!("{:?} basis {}", r.kind, r.basis).to_lowercase(),
+                    r.share,
+                    [r.alpha_model, r.alpha_single],
+                    [&r.alpha, &r.diffuse, &r.f0],
+                    r.alpha_changed_fraction,
+                ));
+            }
+            let mean_alpha = |m: &MapsModelRow| {
+                m.maps_fit
+                    .maps
+                    .roughness
+                    .as_ref()
+                    .map_or(f64::NAN, |a| a.iter().sum::<f64>() / a.len() as f64)
+            };
+            let alpha_of = |model: Model| {
+                self.models
+                    .iter()
+                    .find(|m| m.model == model)
+                    .map_or(f64::NAN, mean_alpha)
+            };
+            rows.push(cells(
+                "all texels".into(),
+                1.0,
+                [alpha_of(d.model), alpha_of(d.minus)],
+                [&d.alpha, &d.diffuse, &d.f0],
+                d.alpha_changed_fraction,
+            ));
+        }
+        let differences = Table {
+            heading: "Multi-bounce minus single".into(),
+            header: [
+                "model",
+                "where (bases of the model)",
+                "texels",
+                "alpha single",
+                "alpha model",
+                "delta alpha mean [5%, 95%]",
+                "|delta alpha| > 0.02",
+                "delta diffuse",
+                "delta F0",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows,
+            note: Some(
+                "Per texel, the model's map minus single's (diffuse and F0: mean over RGB); regions are the basis materials of the model's fit."
+                    .into(),
+            ),
+        };
+        vec![models, differences]
+    }
+
+    fn figures(&self) -> Vec<(String, String)> {
+        let rows: Vec<String> = self.maps_image.rows.iter().map(|m| m.to_string()).collect();
+        let mut figures = vec![(
+            format!(
+                "Maps: rows {}; columns {}",
+                rows.join(", "),
+                self.maps_image.columns.join(", ")
+            ),
+            self.maps_image.path.clone(),
+        )];
+        for d in &self.differences {
+            let images = &d.images;
+            figures.push((
+                format!(
+                    "{} minus single: alpha (red: rougher in {}; full colour at +-{:.3})",
+                    d.difference.model, d.difference.model, images.alpha_scale
+                ),
+                images.alpha.clone(),
+            ));
+            figures.push((
+                format!(
+                    "{} minus single: diffuse albedo (full colour at +-{:.3})",
+                    d.difference.model, images.diffuse_scale
+                ),
+                images.diffuse.clone(),
+            ));
+        }
+        figures
+    }
+
+    fn image_grid(&self) -> Vec<(String, Vec<(String, String)>)> {
+        let models: Vec<Model> = self.models.iter().map(|r| r.model).collect();
+        photo_grid(&self.photos, &models)
+    }
+}
