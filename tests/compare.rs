@@ -100,12 +100,7 @@ fn multi_bounce_photos_rank_single_below_kulla_conty_in_every_output() {
     assert!(single["posterior"].is_null() && single["probability"].is_null());
 
     // Every file of the report.
-    let photos: Vec<&str> = report["photos"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| p.as_str().unwrap())
-        .collect();
+    let photos = strings(&report["photos"]);
     assert_eq!(photos.len(), 9);
     for file in ["report.md", "report.html", "report.json", "loss_curves.png"] {
         assert!(out.join(file).is_file(), "missing {file}");

@@ -6,7 +6,7 @@ mod common;
 use bouncefit::bsdf::Model;
 use bouncefit::maps::{AnyMaterial, MaterialMaps, TexelGrid};
 use bouncefit::material::{FresnelSpec, Material};
-use common::{read_json, repo, run_bad, run_ok, synth};
+use common::{read_json, repo, run_bad, run_ok, strings, synth};
 use std::path::{Path, PathBuf};
 
 /// Rough copper (the multi-bounce case: alpha 0.65) and a glossy red paint.
@@ -369,12 +369,7 @@ fn compare_maps_reports_each_model_and_what_multiple_bounces_change() {
     assert_eq!(report["kind"], "maps");
     assert_eq!(report["texels"], serde_json::json!([side, side]));
     assert_eq!(report["holdout_photo"], 9);
-    let photos: Vec<&str> = report["photos"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| p.as_str().unwrap())
-        .collect();
+    let photos = strings(&report["photos"]);
     assert_eq!(photos.len(), 10);
     assert_eq!(
         report["pixels_used"].as_u64().unwrap(),

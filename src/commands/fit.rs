@@ -566,16 +566,22 @@ pub fn residuals(predicted: &[[f64; 3]], records: &ShadingRecords) -> Vec<[f64; 
         .collect()
 }
 
-pub fn run_fit(args: &FitArgs) -> Result<()> {
-    if args.map_options.maps {
-        return super::fit_maps::run_maps_fit(args);
-    }
-    let capture = args.options.real.open(&args.capture)?;
+/// The fit file `-o` names, or `fits/<capture name>.json`, checked against overwriting.
+pub(super) fn output_path(args: &FitArgs, capture: &Capture) -> Result<PathBuf> {
     let output = args
         .output
         .clone()
         .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
     check_overwrite(&output, args.force)?;
+    Ok(output)
+}
+
+pub fn run_fit(args: &FitArgs) -> Result<()> {
+    if args.map_options.maps {
+        return super::fit_maps::run_maps_fit(args);
+    }
+    let capture = args.options.real.open(&args.capture)?;
+    let output = output_path(args, &capture)?;
     let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
     let (records, region) = load_records(&args.capture, &capture, &args.options)?;
     let Some(done) = fit_and_sample(

@@ -3,9 +3,9 @@
 //! `normal.png`) plus residual images, every output staged and committed at the end. Pixels are
 //! evaluated at their centre (one sub-sample), so each sees exactly one texel.
 
-use super::fit::{load_records, residuals, FitArgs, FitOptionArgs};
+use super::fit::{load_records, output_path, residuals, FitArgs, FitOptionArgs};
 use super::images::{display_exposure, write_photo_images};
-use super::output::{check_overwrite, StagedFolder};
+use super::output::StagedFolder;
 use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
@@ -68,11 +68,7 @@ pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
         ));
     };
     let capture = args.options.real.open(&args.capture)?;
-    let output = args
-        .output
-        .clone()
-        .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
-    check_overwrite(&output, args.force)?;
+    let output = output_path(args, &capture)?;
     let maps_folder = StagedFolder::new(&MaterialMaps::folder_beside(&output), args.force)?;
     let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
     let set = MapsSet::new(&args.capture, capture, &args.options, &args.map_options)?;
