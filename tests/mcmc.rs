@@ -126,7 +126,11 @@ fn intervals_cover_the_truth_on_noisy_synthetic_sets() {
         let fit = mcmc_fit(
             &set,
             &dir.path().join(format!("fit{set_index}.json")),
-            &[&SCHEDULE[..], &["--loss", "relative-l2", "--model-error", "none"]].concat(),
+            &[
+                &SCHEDULE[..],
+                &["--loss", "relative-l2", "--model-error", "none"],
+            ]
+            .concat(),
         );
         let posterior = &fit["posterior"];
         let rhat = posterior["rhat_max"].as_f64().unwrap();
@@ -324,8 +328,19 @@ fn bad_mcmc_options_are_refused_without_output() {
 /// Nine photos of an 8 cm sample, 24x24 pixels: five flash photos from different camera
 /// positions and four oblique point lights; `{e0}`..`{e8}` are the photos' exposures.
 fn nine_photo_capture(exposures: &[f64; 9]) -> String {
-    let cameras = [[0.0, 0.0], [3.0, 3.2], [-2.6, -2.1], [2.4, -2.8], [-3.1, 2.5]];
-    let lights = [[-9.0, 2.0, 12.0], [6.0, -8.0, 10.0], [7.0, 7.0, 11.0], [-5.0, -7.0, 13.0]];
+    let cameras = [
+        [0.0, 0.0],
+        [3.0, 3.2],
+        [-2.6, -2.1],
+        [2.4, -2.8],
+        [-3.1, 2.5],
+    ];
+    let lights = [
+        [-9.0, 2.0, 12.0],
+        [6.0, -8.0, 10.0],
+        [7.0, 7.0, 11.0],
+        [-5.0, -7.0, 13.0],
+    ];
     let mut text = String::from(
         "name = \"nine\"\nunits = \"cm\"\n[sample]\nwidth = 8.0\nheight = 8.0\n[camera]\n\
          model = \"rectified\"\nposition = [0.0, 0.0, 18.0]\nresolution = [24, 24]\n",
@@ -362,7 +377,12 @@ fn per_photo_exposure_errors_widen_intervals_to_the_jackknife_spread() {
     let material_path = dir.path().join("m.material.json");
     std::fs::write(&material_path, material("single", 0.3, [0.9, 0.6, 0.4])).unwrap();
     let set = dir.path().join("set");
-    synth(&material_path, &capture, &set, &["--noise", "0.01", "--seed", "5", "--pixel-samples", "1"]);
+    synth(
+        &material_path,
+        &capture,
+        &set,
+        &["--noise", "0.01", "--seed", "5", "--pixel-samples", "1"],
+    );
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(77);
     let exposures: [f64; 9] =
         [0; 9].map(|_| 1.0 + 0.03 * rng.sample::<f64, _>(rand_distr::StandardNormal));
@@ -399,16 +419,28 @@ fn per_photo_exposure_errors_widen_intervals_to_the_jackknife_spread() {
                 let name = format!("{i:02}.exr");
                 std::fs::copy(set.join(&name), fold.join(&name)).unwrap();
             }
-            let fit = fit_json(&fold, &["--pixel-samples", "1"], &dir.path().join(format!("jk{left_out}.json")));
+            let fit = fit_json(
+                &fold,
+                &["--pixel-samples", "1"],
+                &dir.path().join(format!("jk{left_out}.json")),
+            );
             fit["f0"][0].as_f64().unwrap()
         })
         .collect();
     let mean = leave_one_out.iter().sum::<f64>() / 9.0;
-    let jackknife = (8.0 / 9.0 * leave_one_out.iter().map(|t| (t - mean).powi(2)).sum::<f64>()).sqrt();
+    let jackknife = (8.0 / 9.0
+        * leave_one_out
+            .iter()
+            .map(|t| (t - mean).powi(2))
+            .sum::<f64>())
+    .sqrt();
     let (with, without) = (sd_of(&adjusted), sd_of(&model_only));
     eprintln!("F0 red sd: jackknife {jackknife:.5}, adjusted {with:.5}, model only {without:.5}");
     // The two estimators of the between-photo variance agree within the jackknife's own
     // finite-sample spread (8 degrees of freedom: a 95% range of about 0.55x to 1.45x in sd).
-    assert!((0.55..1.6).contains(&(with / jackknife)), "{with} against {jackknife}");
+    assert!(
+        (0.55..1.6).contains(&(with / jackknife)),
+        "{with} against {jackknife}"
+    );
     assert!(without < 0.4 * jackknife, "{without} against {jackknife}");
 }
