@@ -59,13 +59,20 @@ pub fn conductor<T: Real>(c: T, eta: T, k: T) -> T {
     let k2 = k * k;
     // eta^2 - k^2 - sin^2, grouped so an index-matched conductor gives exactly c^2.
     let t0 = eta2 - k2 - T::one() + c2;
-    let a2pb2 = (t0 * t0 + T::c(4.0) * eta2 * k2).sqrt();
-    let a = ((a2pb2 + t0) * T::c(0.5)).max_c(0.0).sqrt();
+    // The square roots' arguments are floored at the smallest normal `f64`, not at zero: a
+    // dual number's square root at exactly zero has the derivative 0 / 0 (an absorption-free
+    // `k = 0` with `eta < 1` below the critical angle gives `a2pb2 + t0 = 0`, and so does a
+    // `k` whose `4 eta^2 k^2` rounds away beside `t0^2`). The value moves by 1e-154.
+    let a2pb2 = (t0 * t0 + T::c(4.0) * eta2 * k2)
+        .max_c(f64::MIN_POSITIVE)
+        .sqrt();
+    let a = ((a2pb2 + t0) * T::c(0.5)).max_c(f64::MIN_POSITIVE).sqrt();
     let b2 = ((a2pb2 - t0) * T::c(0.5)).max_c(0.0);
-    let rs = ((a - c).sq() + b2) / ((a + c).sq() + b2);
+    // rs = n1 / d1, rp = rs n2 / d2, and (rs + rp) / 2 = n1 (d2 + n2) / (2 d1 d2): one division.
+    let (n1, d1) = ((a - c).sq() + b2, (a + c).sq() + b2);
     let (ac, b2c2) = (a * c, b2 * c2);
-    let rp = rs * ((ac - s2).sq() + b2c2) / ((ac + s2).sq() + b2c2);
-    (rs + rp) * T::c(0.5)
+    let (n2, d2) = ((ac - s2).sq() + b2c2, (ac + s2).sq() + b2c2);
+    n1 * (d2 + n2) / (T::c(2.0) * d1 * d2)
 }
 
 /// Exact unpolarised reflectance of a dielectric interface with relative index `eta`
