@@ -7,7 +7,8 @@
 //! | --- | --- |
 //! | `pairs` | direction pairs: the estimator table's configurations ([`super::estimators::configurations`]), as many as the table has times [`PAIRS_PER_CONFIGURATION`] |
 //! | `scalar_ns_per_eval` | thread CPU time per [`crate::bsdf::Brdf::eval`] of `single` |
-//! | `batch_ns_per_eval` | thread CPU time per pair of [`BatchRecords::render`] (one record per pixel), geometry prepared once as a fit prepares it |
+//! | `batch_ns_per_eval` | thread CPU time per pair of [`BatchRecords::render`] (one record per pixel) with `f32` lanes, the fits' default, geometry prepared once as a fit prepares it |
+//! | `batch_f64_ns_per_eval` | the same with `f64` lanes |
 //! | `batch_prepare_ns_per_eval` | thread CPU time per pair of [`BatchRecords::new`]: the one-off cost, for comparison with kernels that take raw direction pairs |
 //! | `speedup` | `scalar_ns_per_eval / batch_ns_per_eval` |
 
@@ -17,7 +18,7 @@ use crate::albedo::rng_stream;
 use crate::bsdf::Model;
 use crate::material::Material;
 use crate::microfacet::{Height, NdfKind};
-use crate::render::batch::BatchRecords;
+use crate::render::batch::{BatchRecords, Precision};
 use crate::scalar::Vec3;
 use crate::shading::{PhotoSpan, ShadingRecords};
 use serde::Serialize;
@@ -34,6 +35,7 @@ pub struct KernelRow {
     pub pairs: usize,
     pub scalar_ns_per_eval: f64,
     pub batch_ns_per_eval: f64,
+    pub batch_f64_ns_per_eval: f64,
     pub batch_prepare_ns_per_eval: f64,
     pub speedup: f64,
 }
@@ -106,9 +108,11 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
                 black_box(brdf.eval(wi, wo, &mut rng));
             }
         });
-        let batch = BatchRecords::new(&records, &all);
-        let batch_ns = per_pair(pairs, seconds, || {
-            black_box(batch.render(black_box(&single), [0.0; 3]));
+        let [batch_ns, batch_f64_ns] = [Precision::F32, Precision::F64].map(|precision| {
+            let batch = BatchRecords::with_precision(&records, &all, precision);
+            per_pair(pairs, seconds, || {
+                black_box(batch.render(black_box(&single), [0.0; 3]));
+            })
         });
         let prepare = per_pair(pairs, seconds, || {
             black_box(BatchRecords::new(black_box(&records), &all));
@@ -117,6 +121,7 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
             pairs,
             scalar_ns_per_eval: scalar,
             batch_ns_per_eval: batch_ns,
+            batch_f64_ns_per_eval: batch_f64_ns,
             batch_prepare_ns_per_eval: prepare,
             speedup: scalar / batch_ns,
         }
@@ -132,12 +137,17 @@ mod tests {
         let records = records(512, 1);
         let all: Vec<usize> = (0..512).collect();
         let material = material();
-        let batch = BatchRecords::new(&records, &all).render(&material.single(), [0.0; 3]);
         let scalar = crate::render::render_pixels(&material, &records, &all, 0);
-        assert_eq!(batch.len(), scalar.len());
-        for (b, s) in batch.iter().zip(&scalar) {
-            for c in 0..3 {
-                assert!((b[c] - s[c]).abs() <= 1e-12 * s[c].abs().max(1e-300));
+        // The bounds of `render::batch`'s tests: f64 lanes reorder operations, f32 lanes
+        // round about 30 times.
+        for (precision, tolerance) in [(Precision::F64, 1e-12), (Precision::F32, 2e-6)] {
+            let batch = BatchRecords::with_precision(&records, &all, precision)
+                .render(&material.single(), [0.0; 3]);
+            assert_eq!(batch.len(), scalar.len());
+            for (b, s) in batch.iter().zip(&scalar) {
+                for c in 0..3 {
+                    assert!((b[c] - s[c]).abs() <= tolerance * s[c].abs().max(1e-300));
+                }
             }
         }
         let row = measure(2, 0.0, 1);

@@ -20,6 +20,7 @@ use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
 use crate::material::FresnelSpec;
 use crate::microfacet::{Height, NdfKind};
+use crate::render::batch::Precision;
 use crate::render::plan::{Skip, Skips};
 use crate::render::render_all;
 use crate::shading::{ExclusionCounts, ShadingRecords};
@@ -99,6 +100,10 @@ pub struct FitOptionArgs {
     /// faint-multi, bounce-cap, all); see `bouncefit::render::plan`.
     #[arg(long, value_enum, value_delimiter = ',')]
     pub no_skip: Vec<Skip>,
+    /// Arithmetic of the batch kernel's lanes (see docs/speed.md): f32 (default, the fast
+    /// path) or f64 (the reference it is measured against).
+    #[arg(long, value_enum, default_value = "f32")]
+    pub batch_precision: Precision,
     #[command(flatten)]
     pub real: RealCaptureArgs,
 }
@@ -282,6 +287,7 @@ impl FitOptionArgs {
             projection: !self.no_projection,
             pyramid: self.pyramid,
             skips: Skips::except(&self.no_skip),
+            precision: self.batch_precision,
         }
     }
 

@@ -19,9 +19,11 @@
 //! scalar kernel in the tests; the Fresnel values and derivatives come from the scalar kernel
 //! itself. Lanes: the record loops are branch-free over the arrays and compiled once per
 //! instruction set (AVX-512, AVX2+FMA, SSE2), the widest the CPU has chosen at run time, so the
-//! compiler vectorises them; the arithmetic is `f64`, so the path needs no precision study (issue #15
-//! item 2: f32 is not used). The scalar `f64` kernel stays the reference of `brdf`, `albedo`,
-//! `stress` and the crosschecks.
+//! compiler vectorises them. The lanes' arithmetic is [`Precision::F32`] by default (twice the
+//! lanes of `f64` per instruction, and several times the square roots and divisions per cycle)
+//! or [`Precision::F64`]; pixel sums are `f64` either way. Issue #15 item 2 measures the `f32`
+//! path against the `f64` one (`docs/speed.md`, `tests/batch_precision.rs`). The scalar `f64`
+//! kernel stays the reference of `brdf`, `albedo`, `stress` and the crosschecks.
 //!
 //! Pixel sums add the sub-samples of a pixel in index order inside one task, so results are
 //! bit-identical for any thread count.
@@ -42,59 +44,146 @@ const TASK_PIXELS: usize = super::TASK_PIXELS;
 /// `1 / (2 sqrt(pi))`: `d zL / d s` of Beckmann is this times `exp(-z^2 / s^2)`.
 const HALF_INV_SQRT_PI: f64 = 0.282_094_791_773_878_14;
 
-/// The geometry of the sub-samples of a list of pixels, structure of arrays, for the batch
-/// kernel. Only the sub-samples that can reflect are kept (irradiance not zero, both directions
-/// strictly above the surface); the diffuse term needs only each pixel's irradiance sum.
-#[derive(Clone, Debug, Default)]
-pub struct BatchRecords {
-    /// Records of pixel `k` (position in the pixel list) are `start[k]..start[k + 1]`.
-    start: Vec<usize>,
-    /// Squared components of the half vector.
-    hx2: Vec<f64>,
-    hy2: Vec<f64>,
-    hz2: Vec<f64>,
-    /// `wi.x^2`, `wi.y^2`, `wi.z` (positive).
-    ix2: Vec<f64>,
-    iy2: Vec<f64>,
-    iz: Vec<f64>,
-    /// `wo.x^2`, `wo.y^2`, `wo.z` (positive).
-    ox2: Vec<f64>,
-    oy2: Vec<f64>,
-    oz: Vec<f64>,
-    /// `wi.h`, the angle the Fresnel term sees.
-    cos_d: Vec<f64>,
-    /// Irradiance of each record over the pixel's sub-sample count, per channel.
-    weight: [Vec<f64>; 3],
-    /// Per pixel: sum over all its sub-samples of irradiance / (pi spp): the radiance of a
-    /// white Lambertian layer.
-    lambert: Vec<[f64; 3]>,
+/// The arithmetic of the batch kernel's lanes.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// Single precision lanes (the default): sixteen per AVX-512 instruction.
+    #[default]
+    F32,
+    /// Double precision lanes: the reference the `f32` lanes are measured against.
+    F64,
+}
+
+/// A lane's number type, `f32` or `f64`: the kernel's loops are written once over it.
+pub trait LaneFloat: Real + Default + PartialOrd + 'static {
+    /// The thread's scratch lanes of this type.
+    fn with_lanes<R>(work: impl FnOnce(&mut Lanes<Self>) -> R) -> R;
 }
 
 thread_local! {
     /// Each thread's lanes, kept between tasks: a task's arrays are a few hundred kB, which
     /// the allocator would otherwise map and unmap (and the kernel zero) on every render.
-    static LANES: std::cell::RefCell<Lanes> = std::cell::RefCell::new(Lanes::default());
+    static LANES_F32: std::cell::RefCell<Lanes<f32>> = std::cell::RefCell::new(Lanes::default());
+    static LANES_F64: std::cell::RefCell<Lanes<f64>> = std::cell::RefCell::new(Lanes::default());
+}
+
+impl LaneFloat for f32 {
+    fn with_lanes<R>(work: impl FnOnce(&mut Lanes<f32>) -> R) -> R {
+        LANES_F32.with_borrow_mut(work)
+    }
+}
+
+impl LaneFloat for f64 {
+    fn with_lanes<R>(work: impl FnOnce(&mut Lanes<f64>) -> R) -> R {
+        LANES_F64.with_borrow_mut(work)
+    }
+}
+
+/// The per-record arrays of the kept sub-samples, in the lanes' number type.
+#[derive(Clone, Debug, Default)]
+struct Geometry<F> {
+    /// Squared components of the half vector.
+    hx2: Vec<F>,
+    hy2: Vec<F>,
+    hz2: Vec<F>,
+    /// `wi.x^2`, `wi.y^2`, `wi.z` (positive).
+    ix2: Vec<F>,
+    iy2: Vec<F>,
+    iz: Vec<F>,
+    /// `wo.x^2`, `wo.y^2`, `wo.z` (positive).
+    ox2: Vec<F>,
+    oy2: Vec<F>,
+    oz: Vec<F>,
+    /// `wi.h`, the angle the Fresnel term sees.
+    cos_d: Vec<F>,
+    /// Irradiance of each record over the pixel's sub-sample count, per channel.
+    weight: [Vec<F>; 3],
+}
+
+impl<F: LaneFloat> Geometry<F> {
+    /// Append one record: directions `wi`, `wo` (both above the surface), its half vector `h`
+    /// and its weight per channel, computed in `f64` and rounded once.
+    fn push(&mut self, wi: [f64; 3], wo: [f64; 3], h: [f64; 3], weight: [f64; 3]) {
+        let lanes = [
+            (&mut self.hx2, h[0] * h[0]),
+            (&mut self.hy2, h[1] * h[1]),
+            (&mut self.hz2, h[2] * h[2]),
+            (&mut self.ix2, wi[0] * wi[0]),
+            (&mut self.iy2, wi[1] * wi[1]),
+            (&mut self.iz, wi[2]),
+            (&mut self.ox2, wo[0] * wo[0]),
+            (&mut self.oy2, wo[1] * wo[1]),
+            (&mut self.oz, wo[2]),
+            (&mut self.cos_d, wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]),
+        ];
+        for (lane, value) in lanes {
+            lane.push(F::c(value));
+        }
+        for (lane, w) in self.weight.iter_mut().zip(weight) {
+            lane.push(F::c(w));
+        }
+    }
+
+    /// The arrays of the records `r`: `[hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz]`.
+    fn directions(&self, r: std::ops::Range<usize>) -> [&[F]; 9] {
+        [
+            &self.hx2, &self.hy2, &self.hz2, &self.ix2, &self.iy2, &self.iz, &self.ox2, &self.oy2,
+            &self.oz,
+        ]
+        .map(|lane| &lane[r.clone()])
+    }
+}
+
+/// The records' arrays in the precision chosen at construction.
+#[derive(Clone, Debug)]
+enum Stored {
+    F32(Geometry<f32>),
+    F64(Geometry<f64>),
+}
+
+/// The geometry of the sub-samples of a list of pixels, structure of arrays, for the batch
+/// kernel. Only the sub-samples that can reflect are kept (irradiance not zero, both directions
+/// strictly above the surface); the diffuse term needs only each pixel's irradiance sum.
+#[derive(Clone, Debug)]
+pub struct BatchRecords {
+    /// Records of pixel `k` (position in the pixel list) are `start[k]..start[k + 1]`.
+    start: Vec<usize>,
+    stored: Stored,
+    /// Per pixel: sum over all its sub-samples of irradiance / (pi spp): the radiance of a
+    /// white Lambertian layer.
+    lambert: Vec<[f64; 3]>,
 }
 
 /// Values per record of one evaluation, and what the pixel sums need.
 #[derive(Default)]
-struct Lanes {
+pub struct Lanes<F> {
     /// `D / (4 den)`: the Fresnel-free part of `f`.
-    lobe: Vec<f64>,
+    lobe: Vec<F>,
     /// `d lobe / d ax` and `d lobe / d ay`.
-    d_ax: Vec<f64>,
-    d_ay: Vec<f64>,
+    d_ax: Vec<F>,
+    d_ay: Vec<F>,
     /// `F(wi.h)` per channel, and its derivatives by the channel's first and second Fresnel
     /// parameter (see [`PixelTangents`]).
-    fresnel: [Vec<f64>; 3],
-    d_fresnel_a: [Vec<f64>; 3],
-    d_fresnel_b: [Vec<f64>; 3],
+    fresnel: [Vec<F>; 3],
+    d_fresnel_a: [Vec<F>; 3],
+    d_fresnel_b: [Vec<F>; 3],
     /// Per channel, the record's contribution to `d p_c / d ax` and `d p_c / d ay`.
-    by_ax: [Vec<f64>; 3],
-    by_ay: [Vec<f64>; 3],
+    by_ax: [Vec<F>; 3],
+    by_ay: [Vec<F>; 3],
     /// Per channel, with Turquin's compensation: `F F0 dg/dalpha` (see
-    /// [`BatchRecords::compensate`]).
-    scale_slope: [Vec<f64>; 3],
+    /// [`compensate`]).
+    scale_slope: [Vec<F>; 3],
 }
 
 /// What the batch kernel evaluates: the single-bounce lobe, optionally scaled by Turquin's
@@ -146,70 +235,63 @@ pub struct PixelTangents {
     pub diffuse: Vec<[f64; 3]>,
 }
 
-/// `BatchRecords::fill_lanes_any` compiled for the instruction sets `features` as the method
-/// `name` (x86-64 only; the caller checks the CPU has them).
+/// [`fill_lanes_any`] compiled for the instruction sets `features` as the function `name`
+/// (x86-64 only; the caller checks the CPU has them).
 macro_rules! compiled_for {
     ($name:ident, $features:literal) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = $features)]
-        fn $name(
-            &self,
+        fn $name<F: LaneFloat>(
+            geometry: &Geometry<F>,
             lobe: &Lobe,
             range: std::ops::Range<usize>,
             tangents: bool,
-            lanes: &mut Lanes,
+            lanes: &mut Lanes<F>,
         ) {
-            self.fill_lanes_any(lobe, range, tangents, lanes)
+            fill_lanes_any(geometry, lobe, range, tangents, lanes)
         }
     };
 }
 
 impl BatchRecords {
-    /// The records of `pixels` (indices into the per-pixel arrays of `records`).
+    /// The records of `pixels` (indices into the per-pixel arrays of `records`), with lanes
+    /// of the default precision ([`Precision::F32`]).
     pub fn new(records: &ShadingRecords, pixels: &[usize]) -> BatchRecords {
-        let spp = records.samples_per_pixel;
-        let mut batch = BatchRecords {
-            start: Vec::with_capacity(pixels.len() + 1),
-            lambert: Vec::with_capacity(pixels.len()),
-            ..BatchRecords::default()
-        };
-        batch.start.push(0);
-        let norm = 1.0 / spp as f64;
-        for &p in pixels {
-            let mut lambert = [0.0; 3];
-            for s in p * spp..(p + 1) * spp {
-                let e = records.irradiance[s];
-                if e == [0.0; 3] {
-                    continue;
-                }
-                for c in 0..3 {
-                    lambert[c] += e[c] * FRAC_1_PI;
-                }
-                let (wi, wo) = (records.wi[s], records.wo[s]);
-                if wi[2] <= 0.0 || wo[2] <= 0.0 {
-                    continue;
-                }
-                let sum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
-                let len = (sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]).sqrt();
-                let h = sum.map(|v| v / len);
-                batch.hx2.push(h[0] * h[0]);
-                batch.hy2.push(h[1] * h[1]);
-                batch.hz2.push(h[2] * h[2]);
-                batch.ix2.push(wi[0] * wi[0]);
-                batch.iy2.push(wi[1] * wi[1]);
-                batch.iz.push(wi[2]);
-                batch.ox2.push(wo[0] * wo[0]);
-                batch.oy2.push(wo[1] * wo[1]);
-                batch.oz.push(wo[2]);
-                batch.cos_d.push(wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]);
-                for (lane, e) in batch.weight.iter_mut().zip(e) {
-                    lane.push(e * norm);
+        BatchRecords::with_precision(records, pixels, Precision::default())
+    }
+
+    /// [`BatchRecords::new`] with lanes of `precision`.
+    pub fn with_precision(
+        records: &ShadingRecords,
+        pixels: &[usize],
+        precision: Precision,
+    ) -> BatchRecords {
+        match precision {
+            Precision::F32 => {
+                let (start, lambert, geometry) = gather::<f32>(records, pixels);
+                BatchRecords {
+                    start,
+                    lambert,
+                    stored: Stored::F32(geometry),
                 }
             }
-            batch.lambert.push(lambert.map(|v| v * norm));
-            batch.start.push(batch.hx2.len());
+            Precision::F64 => {
+                let (start, lambert, geometry) = gather::<f64>(records, pixels);
+                BatchRecords {
+                    start,
+                    lambert,
+                    stored: Stored::F64(geometry),
+                }
+            }
         }
-        batch
+    }
+
+    /// The precision of the lanes.
+    pub fn precision(&self) -> Precision {
+        match self.stored {
+            Stored::F32(_) => Precision::F32,
+            Stored::F64(_) => Precision::F64,
+        }
     }
 
     /// Number of pixels.
@@ -225,7 +307,7 @@ impl BatchRecords {
 
     /// Number of records the kernel evaluates per render.
     pub fn record_count(&self) -> usize {
-        self.hx2.len()
+        self.start.last().copied().unwrap_or(0)
     }
 
     /// Predicted radiance of every pixel for the single-bounce model `single` plus a
@@ -278,7 +360,7 @@ impl BatchRecords {
     }
 
     /// Pixels `task * TASK_PIXELS ..` into `out` (and their tangents into `tangents`: by ax,
-    /// ay, first and second Fresnel parameter).
+    /// ay, first and second Fresnel parameter), in the stored precision.
     fn task(
         &self,
         lobe: &Lobe,
@@ -287,18 +369,34 @@ impl BatchRecords {
         out: &mut [[f64; 3]],
         tangents: Option<[&mut [[f64; 3]]; 4]>,
     ) {
+        match &self.stored {
+            Stored::F32(geometry) => self.task_in(geometry, lobe, diffuse, task, out, tangents),
+            Stored::F64(geometry) => self.task_in(geometry, lobe, diffuse, task, out, tangents),
+        }
+    }
+
+    fn task_in<F: LaneFloat>(
+        &self,
+        geometry: &Geometry<F>,
+        lobe: &Lobe,
+        diffuse: [f64; 3],
+        task: usize,
+        out: &mut [[f64; 3]],
+        tangents: Option<[&mut [[f64; 3]]; 4]>,
+    ) {
         let first = task * TASK_PIXELS;
         let range = self.start[first]..self.start[first + out.len()];
-        LANES.with_borrow_mut(|lanes| {
-            self.fill_lanes(lobe, range.clone(), tangents.is_some(), lanes);
+        F::with_lanes(|lanes| {
+            fill_lanes(geometry, lobe, range.clone(), tangents.is_some(), lanes);
             self.sum_pixels(lanes, diffuse, first, range, out, tangents);
         });
     }
 
-    /// Each pixel of `out` (the first is pixel `first`) from the lanes of `range`.
-    fn sum_pixels(
+    /// Each pixel of `out` (the first is pixel `first`) from the lanes of `range`, summed in
+    /// `f64`.
+    fn sum_pixels<F: LaneFloat>(
         &self,
-        lanes: &Lanes,
+        lanes: &Lanes<F>,
         diffuse: [f64; 3],
         first: usize,
         range: std::ops::Range<usize>,
@@ -308,331 +406,404 @@ impl BatchRecords {
         // After `fill_lanes`, every lane array holds the record's weighted contribution, so a
         // pixel's value is the sum of its records' lanes, added in index order.
         let offsets = &self.start[first..=first + out.len()];
-        for (i, value) in out.iter_mut().enumerate() {
-            let k = first + i;
-            let records = offsets[i] - range.start..offsets[i + 1] - range.start;
-            let sum = |lane: &[f64]| -> f64 { lane[records.clone()].iter().sum() };
-            for c in 0..3 {
-                value[c] = sum(&lanes.fresnel[c]) + diffuse[c] * self.lambert[k][c];
-            }
-            if let Some([ax, ay, fa, fb]) = &mut tangents {
+        let n = range.len();
+        let sum = |lanes: [&[F]; 3], records: std::ops::Range<usize>| -> [f64; 3] {
+            let mut total = [0.0; 3];
+            for r in records {
                 for c in 0..3 {
-                    ax[i][c] = sum(&lanes.by_ax[c]);
-                    ay[i][c] = sum(&lanes.by_ay[c]);
-                    fa[i][c] = sum(&lanes.d_fresnel_a[c]);
-                    fb[i][c] = sum(&lanes.d_fresnel_b[c]);
+                    total[c] += lanes[c][r].re64();
+                }
+            }
+            total
+        };
+        fn channels<F>(lane: &[Vec<F>; 3], n: usize) -> [&[F]; 3] {
+            [0, 1, 2].map(|c| &lane[c][..n])
+        }
+        let fresnel = channels(&lanes.fresnel, n);
+        for (i, value) in out.iter_mut().enumerate() {
+            let records = offsets[i] - range.start..offsets[i + 1] - range.start;
+            let specular = sum(fresnel, records);
+            let lambert = self.lambert[first + i];
+            *value = [0, 1, 2].map(|c| specular[c] + diffuse[c] * lambert[c]);
+        }
+        if let Some([ax, ay, fa, fb]) = &mut tangents {
+            let lanes = [
+                &lanes.by_ax,
+                &lanes.by_ay,
+                &lanes.d_fresnel_a,
+                &lanes.d_fresnel_b,
+            ]
+            .map(|lane| channels(lane, n));
+            for (lane, out) in lanes.into_iter().zip([ax, ay, fa, fb]) {
+                for (i, value) in out.iter_mut().enumerate() {
+                    *value = sum(lane, offsets[i] - range.start..offsets[i + 1] - range.start);
                 }
             }
         }
     }
+}
 
-    /// [`Lanes`] for the records in `range`, in the widest SIMD instruction set the CPU has
-    /// (checked at run time; the loops are compiled once per set).
-    fn fill_lanes(
-        &self,
-        lobe: &Lobe,
-        range: std::ops::Range<usize>,
-        tangents: bool,
-        lanes: &mut Lanes,
-    ) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.fill_lanes_avx512(lobe, range, tangents, lanes) };
-            }
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                // SAFETY: as above.
-                return unsafe { self.fill_lanes_avx2(lobe, range, tangents, lanes) };
-            }
-        }
-        self.fill_lanes_any(lobe, range, tangents, lanes)
-    }
-
-    compiled_for!(fill_lanes_avx512, "avx512f,avx2,fma");
-    compiled_for!(fill_lanes_avx2, "avx2,fma");
-
-    /// The lanes' loops, inlined into each instruction-set variant of [`Self::fill_lanes`].
-    #[inline(always)]
-    fn fill_lanes_any(
-        &self,
-        lobe: &Lobe,
-        range: std::ops::Range<usize>,
-        tangents: bool,
-        lanes: &mut Lanes,
-    ) {
-        let single = lobe.single;
-        self.lobes(single, range.clone(), tangents, lanes);
-        fresnels(&single.fresnel, &self.cos_d[range.clone()], tangents, lanes);
-        let n = range.len();
-        // d alpha / d ax and d alpha / d ay of Turquin's alpha = sqrt(ax ay) (zero without it).
-        let mut dalpha = [0.0; 2];
-        if let Some(table) = lobe.turquin {
-            self.compensate(single, table, range.clone(), tangents, lanes);
-            let (ax, ay) = (single.microfacet.ax, single.microfacet.ay);
-            let alpha = (ax * ay).sqrt();
-            dalpha = [alpha / (2.0 * ax), alpha / (2.0 * ay)];
-        }
-        let lobe_scaled = lobe.turquin.is_some();
-        // Weight by the irradiance: `fresnel` becomes the record's contribution `w F lobe`,
-        // the Fresnel derivatives `w lobe dF`, and `by_ax`, `by_ay` get `w F d lobe`.
-        for c in 0..3 {
-            let w = &self.weight[c][range.clone()];
-            let lobe = &lanes.lobe[..n];
-            if tangents {
-                lanes.by_ax[c].resize(n, 0.0);
-                lanes.by_ay[c].resize(n, 0.0);
-                let (f, a, b) = (
-                    &lanes.fresnel[c][..n],
-                    &mut lanes.d_fresnel_a[c][..n],
-                    &mut lanes.d_fresnel_b[c][..n],
-                );
-                let (by_ax, by_ay) = (&mut lanes.by_ax[c][..n], &mut lanes.by_ay[c][..n]);
-                let (d_ax, d_ay) = (&lanes.d_ax[..n], &lanes.d_ay[..n]);
-                for l in 0..n {
-                    let (wl, wf) = (w[l] * lobe[l], w[l] * f[l]);
-                    a[l] *= wl;
-                    b[l] *= wl;
-                    by_ax[l] = wf * d_ax[l];
-                    by_ay[l] = wf * d_ay[l];
-                }
-                if lobe_scaled {
-                    let slope = &lanes.scale_slope[c][..n];
-                    for l in 0..n {
-                        let wl = w[l] * lobe[l] * slope[l];
-                        by_ax[l] += wl * dalpha[0];
-                        by_ay[l] += wl * dalpha[1];
-                    }
-                }
-            }
-            for (f, (&w, &lobe)) in lanes.fresnel[c][..n].iter_mut().zip(w.iter().zip(lobe)) {
-                *f *= w * lobe;
-            }
-        }
-    }
-
-    /// Turquin 2019 eq. 6-7 ([`crate::bsdf::turquin`]): scale the lanes by
-    /// `S_c = 1 + F0_c g(mu_o, alpha)`, `g = (1 - E) / E` with the white albedo `E` of `table`
-    /// at `mu_o = wo.z` and `alpha = sqrt(ax ay)`, before the weighting step: `F` becomes
-    /// `F S` (so the contribution is `w F S lobe`), `dF` becomes `dF S + F g dF0`, and
-    /// `scale_slope` gets `F F0 dg/dalpha`, the part of `d (F S lobe) / d alpha` the lobe's own
-    /// derivative misses (the weighting step adds it times `w lobe dalpha/da`).
-    fn compensate(
-        &self,
-        single: &SingleBounce<f64>,
-        table: &AlbedoTable,
-        range: std::ops::Range<usize>,
-        tangents: bool,
-        lanes: &mut Lanes,
-    ) {
-        let n = range.len();
-        let mf = &single.microfacet;
-        let alpha = Dual64::from_re((mf.ax * mf.ay).sqrt()).derivative();
-        let f0 = f0_with_tangents(&single.fresnel);
-        let oz = &self.oz[range];
-        for c in 0..3 {
-            lanes.scale_slope[c].resize(n, 0.0);
-        }
-        for (l, &mu) in oz.iter().enumerate() {
-            let e = table.e(mu, alpha).max_c(1e-6);
-            let g = (Dual64::from_re(1.0) - e).max_c(0.0) / e;
-            for (c, &(f0, df0_a, df0_b)) in f0.iter().enumerate() {
-                let f = lanes.fresnel[c][l];
-                let scale = 1.0 + f0 * g.re;
-                if tangents {
-                    let (a, b) = (&mut lanes.d_fresnel_a[c][l], &mut lanes.d_fresnel_b[c][l]);
-                    *a = *a * scale + f * g.re * df0_a;
-                    *b = *b * scale + f * g.re * df0_b;
-                    lanes.scale_slope[c][l] = f * f0 * g.eps;
-                }
-                lanes.fresnel[c][l] = f * scale;
-            }
-        }
-    }
-
-    /// The Fresnel-free lobe `D / (4 den)` of the records in `range`, and its roughness
-    /// derivatives when `tangents`.
-    #[inline(always)]
-    fn lobes(
-        &self,
-        single: &SingleBounce<f64>,
-        range: std::ops::Range<usize>,
-        tangents: bool,
-        lanes: &mut Lanes,
-    ) {
-        let n = range.len();
-        lanes.lobe.resize(n, 0.0);
-        if tangents {
-            lanes.d_ax.resize(n, 0.0);
-            lanes.d_ay.resize(n, 0.0);
-        }
-        match (single.microfacet.ndf, tangents) {
-            (NdfKind::Ggx, false) => self.ggx_lobes::<false>(single, range, lanes),
-            (NdfKind::Ggx, true) => self.ggx_lobes::<true>(single, range, lanes),
-            (NdfKind::Beckmann, _) => self.any_lobes(single, range, tangents, lanes),
-        }
-    }
-
-    /// The geometry arrays of the records `r`: `[hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz]`.
-    fn geometry(&self, r: std::ops::Range<usize>) -> [&[f64]; 9] {
-        [
-            &self.hx2, &self.hy2, &self.hz2, &self.ix2, &self.iy2, &self.iz, &self.ox2, &self.oy2,
-            &self.oz,
-        ]
-        .map(|lane| &lane[r.clone()])
-    }
-
-    /// [`BatchRecords::lobes`] for GGX: one branch-free loop over the record arrays, which the
-    /// compiler turns into SIMD lanes. `|w.z| Lambda = s^2 / (2 (sqrt(z^2 + s^2) + z))` as in
-    /// [`ggx::z_lambda`] (no square root of `s^2` needed, and `d zL / d ax = ax w.x^2 /
-    /// (2 sqrt(z^2 + s^2))`); `d ln D / d ax = -1/ax + 4 h.x^2 / (ax^3 (s_h^2 + h.z^2))`.
-    #[inline(always)]
-    fn ggx_lobes<const TANGENTS: bool>(
-        &self,
-        single: &SingleBounce<f64>,
-        range: std::ops::Range<usize>,
-        lanes: &mut Lanes,
-    ) {
-        let mf = &single.microfacet;
-        let (ax, ay) = (mf.ax, mf.ay);
-        let (ax2, ay2) = (ax * ax, ay * ay);
-        let (inv_ax2, inv_ay2) = (1.0 / ax2, 1.0 / ay2);
-        let norm = 0.25 / (std::f64::consts::PI * ax * ay);
-        let correlated = single.height == Height::Correlated;
-        let r = range;
-        let n = r.len();
-        let [hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz] = self.geometry(r);
-        let lobe = &mut lanes.lobe[..n];
-        let tangent_len = if TANGENTS { n } else { 0 };
-        let (d_ax, d_ay) = (
-            &mut lanes.d_ax[..tangent_len],
-            &mut lanes.d_ay[..tangent_len],
-        );
-        for l in 0..n {
-            let t = hx2[l] * inv_ax2 + hy2[l] * inv_ay2 + hz2[l];
-            let d = norm / (t * t);
-            let (si2, so2) = (ax2 * ix2[l] + ay2 * iy2[l], ax2 * ox2[l] + ay2 * oy2[l]);
-            let (zi, zo) = (iz[l], oz[l]);
-            let (ri, ro) = ((zi * zi + si2).sqrt(), (zo * zo + so2).sqrt());
-            let (zli, zlo) = (si2 / (2.0 * (ri + zi)), so2 / (2.0 * (ro + zo)));
-            let (ai, ao) = (zi + zli, zo + zlo);
-            let den = if correlated {
-                zi * zo + zo * zli + zi * zlo
-            } else {
-                ai * ao
-            };
-            let value = d / den;
-            lobe[l] = value;
-            if TANGENTS {
-                let (hi, ho) = (0.5 / ri, 0.5 / ro);
-                let by = |a: f64, h2: f64, i2: f64, o2: f64| {
-                    let dln_d = (4.0 * h2 / (a * a * t) - 1.0) / a;
-                    let (dzli, dzlo) = (a * i2 * hi, a * o2 * ho);
-                    let d_den = if correlated {
-                        zo * dzli + zi * dzlo
-                    } else {
-                        dzli * ao + ai * dzlo
-                    };
-                    value * (dln_d - d_den / den)
-                };
-                d_ax[l] = by(ax, hx2[l], ix2[l], ox2[l]);
-                d_ay[l] = by(ay, hy2[l], iy2[l], oy2[l]);
-            }
-        }
-    }
-
-    /// [`BatchRecords::lobes`] for any distribution, through the scalar kernel's functions
-    /// ([`beckmann::density_stretched`], [`beckmann::z_lambda`]); Beckmann's `exp` and `erfc`
-    /// have no SIMD form here, so this loop runs a lane at a time.
-    fn any_lobes(
-        &self,
-        single: &SingleBounce<f64>,
-        range: std::ops::Range<usize>,
-        tangents: bool,
-        lanes: &mut Lanes,
-    ) {
-        let mf = &single.microfacet;
-        let (ax, ay) = (mf.ax, mf.ay);
-        let (ax2, ay2) = (ax * ax, ay * ay);
-        let (inv_ax2, inv_ay2) = (1.0 / ax2, 1.0 / ay2);
-        let norm = 0.25 / (ax * ay);
-        let n = range.len();
-        let ndf = mf.ndf;
-        let height = single.height;
-        let r = range;
-        let [hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz] = self.geometry(r);
-        for l in 0..n {
-            let s2h = hx2[l] * inv_ax2 + hy2[l] * inv_ay2;
-            let d1 = match ndf {
-                NdfKind::Ggx => ggx::density_stretched(s2h, hz2[l].sqrt()),
-                NdfKind::Beckmann => beckmann::density_stretched(s2h, hz2[l].sqrt()),
-            };
-            let si = (ax2 * ix2[l] + ay2 * iy2[l]).sqrt();
-            let so = (ax2 * ox2[l] + ay2 * oy2[l]).sqrt();
-            let (zli, zlo) = match ndf {
-                NdfKind::Ggx => (ggx::z_lambda(iz[l], si), ggx::z_lambda(oz[l], so)),
-                NdfKind::Beckmann => (beckmann::z_lambda(iz[l], si), beckmann::z_lambda(oz[l], so)),
-            };
-            let den = match height {
-                Height::Correlated => iz[l] * oz[l] + oz[l] * zli + iz[l] * zlo,
-                Height::Uncorrelated => (iz[l] + zli) * (oz[l] + zlo),
-            };
-            let lobe = d1 * norm / den;
-            lanes.lobe[l] = lobe;
-            if !tangents {
+/// `(start, lambert, geometry)` of [`BatchRecords`] for the records of `pixels`.
+fn gather<F: LaneFloat>(
+    records: &ShadingRecords,
+    pixels: &[usize],
+) -> (Vec<usize>, Vec<[f64; 3]>, Geometry<F>) {
+    let spp = records.samples_per_pixel;
+    let mut start = Vec::with_capacity(pixels.len() + 1);
+    let mut lambert_sums = Vec::with_capacity(pixels.len());
+    let mut geometry = Geometry::default();
+    start.push(0);
+    let norm = 1.0 / spp as f64;
+    for &p in pixels {
+        let mut lambert = [0.0; 3];
+        for s in p * spp..(p + 1) * spp {
+            let e = records.irradiance[s];
+            if e == [0.0; 3] {
                 continue;
             }
-            // d ln D1 / d (s_h^2), then the chain through s_h^2 = hx2/ax^2 + hy2/ay^2.
-            let dln_d1 = match ndf {
-                NdfKind::Ggx => -2.0 / (s2h + hz2[l]),
-                NdfKind::Beckmann => -1.0 / hz2[l],
-            };
-            let dzl_ds = |z: f64, s: f64| -> f64 {
-                if s <= 0.0 {
-                    return 0.0;
-                }
-                match ndf {
-                    NdfKind::Ggx => s / (2.0 * (z * z + s * s).sqrt()),
-                    NdfKind::Beckmann => HALF_INV_SQRT_PI * (-(z * z) / (s * s)).exp(),
-                }
-            };
-            let (gi, go) = (dzl_ds(iz[l], si), dzl_ds(oz[l], so));
-            // d s / d a = a w_a^2 / s (zero where s = 0, where gi, go are zero too).
-            let (ri, ro) = (
-                if si > 0.0 { 1.0 / si } else { 0.0 },
-                if so > 0.0 { 1.0 / so } else { 0.0 },
-            );
-            let d_den = |dzli: f64, dzlo: f64| match height {
-                Height::Correlated => oz[l] * dzli + iz[l] * dzlo,
-                Height::Uncorrelated => dzli * (oz[l] + zlo) + (iz[l] + zli) * dzlo,
-            };
-            let dln_lobe = |a: f64, h2: f64, i2: f64, o2: f64| {
-                let dln_d = -1.0 / a + dln_d1 * (-2.0 * h2 / (a * a * a));
-                let dzli = gi * a * i2 * ri;
-                let dzlo = go * a * o2 * ro;
-                dln_d - d_den(dzli, dzlo) / den
-            };
-            lanes.d_ax[l] = lobe * dln_lobe(ax, hx2[l], ix2[l], ox2[l]);
-            lanes.d_ay[l] = lobe * dln_lobe(ay, hy2[l], iy2[l], oy2[l]);
+            for c in 0..3 {
+                lambert[c] += e[c] * FRAC_1_PI;
+            }
+            let (wi, wo) = (records.wi[s], records.wo[s]);
+            if wi[2] <= 0.0 || wo[2] <= 0.0 {
+                continue;
+            }
+            let sum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
+            let len = (sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]).sqrt();
+            let h = sum.map(|v| v / len);
+            geometry.push(wi, wo, h, e.map(|e| e * norm));
         }
+        lambert_sums.push(lambert.map(|v| v * norm));
+        start.push(geometry.hx2.len());
+    }
+    (start, lambert_sums, geometry)
+}
+
+/// [`Lanes`] for the records in `range`, in the widest SIMD instruction set the CPU has
+/// (checked at run time; the loops are compiled once per set).
+fn fill_lanes<F: LaneFloat>(
+    geometry: &Geometry<F>,
+    lobe: &Lobe,
+    range: std::ops::Range<usize>,
+    tangents: bool,
+    lanes: &mut Lanes<F>,
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has the features the function is compiled for.
+            return unsafe { fill_lanes_avx512(geometry, lobe, range, tangents, lanes) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: as above.
+            return unsafe { fill_lanes_avx2(geometry, lobe, range, tangents, lanes) };
+        }
+    }
+    fill_lanes_any(geometry, lobe, range, tangents, lanes)
+}
+
+compiled_for!(fill_lanes_avx512, "avx512f,avx2,fma");
+compiled_for!(fill_lanes_avx2, "avx2,fma");
+
+/// The lanes' loops, inlined into each instruction-set variant of [`fill_lanes`].
+#[inline(always)]
+fn fill_lanes_any<F: LaneFloat>(
+    geometry: &Geometry<F>,
+    lobe: &Lobe,
+    range: std::ops::Range<usize>,
+    tangents: bool,
+    lanes: &mut Lanes<F>,
+) {
+    let single = lobe.single;
+    lobes(geometry, single, range.clone(), tangents, lanes);
+    fresnels(
+        &single.fresnel,
+        &geometry.cos_d[range.clone()],
+        tangents,
+        lanes,
+    );
+    let n = range.len();
+    // d alpha / d ax and d alpha / d ay of Turquin's alpha = sqrt(ax ay) (zero without it).
+    let mut dalpha = [F::zero(); 2];
+    if let Some(table) = lobe.turquin {
+        compensate(geometry, single, table, range.clone(), tangents, lanes);
+        let (ax, ay) = (single.microfacet.ax, single.microfacet.ay);
+        let alpha = (ax * ay).sqrt();
+        dalpha = [F::c(alpha / (2.0 * ax)), F::c(alpha / (2.0 * ay))];
+    }
+    let lobe_scaled = lobe.turquin.is_some();
+    // Weight by the irradiance: `fresnel` becomes the record's contribution `w F lobe`,
+    // the Fresnel derivatives `w lobe dF`, and `by_ax`, `by_ay` get `w F d lobe`.
+    for c in 0..3 {
+        let w = &geometry.weight[c][range.clone()];
+        let lobe = &lanes.lobe[..n];
+        if tangents {
+            lanes.by_ax[c].resize(n, F::zero());
+            lanes.by_ay[c].resize(n, F::zero());
+            let (f, a, b) = (
+                &lanes.fresnel[c][..n],
+                &mut lanes.d_fresnel_a[c][..n],
+                &mut lanes.d_fresnel_b[c][..n],
+            );
+            let (by_ax, by_ay) = (&mut lanes.by_ax[c][..n], &mut lanes.by_ay[c][..n]);
+            let (d_ax, d_ay) = (&lanes.d_ax[..n], &lanes.d_ay[..n]);
+            for l in 0..n {
+                let (wl, wf) = (w[l] * lobe[l], w[l] * f[l]);
+                a[l] = a[l] * wl;
+                b[l] = b[l] * wl;
+                by_ax[l] = wf * d_ax[l];
+                by_ay[l] = wf * d_ay[l];
+            }
+            if lobe_scaled {
+                let slope = &lanes.scale_slope[c][..n];
+                for l in 0..n {
+                    let wl = w[l] * lobe[l] * slope[l];
+                    by_ax[l] = by_ax[l] + wl * dalpha[0];
+                    by_ay[l] = by_ay[l] + wl * dalpha[1];
+                }
+            }
+        }
+        for (f, (&w, &lobe)) in lanes.fresnel[c][..n].iter_mut().zip(w.iter().zip(lobe)) {
+            *f = *f * (w * lobe);
+        }
+    }
+}
+
+/// Turquin 2019 eq. 6-7 ([`crate::bsdf::turquin`]): scale the lanes by
+/// `S_c = 1 + F0_c g(mu_o, alpha)`, `g = (1 - E) / E` with the white albedo `E` of `table`
+/// at `mu_o = wo.z` and `alpha = sqrt(ax ay)`, before the weighting step: `F` becomes
+/// `F S` (so the contribution is `w F S lobe`), `dF` becomes `dF S + F g dF0`, and
+/// `scale_slope` gets `F F0 dg/dalpha`, the part of `d (F S lobe) / d alpha` the lobe's own
+/// derivative misses (the weighting step adds it times `w lobe dalpha/da`). The table lookup
+/// runs a record at a time in `f64`.
+fn compensate<F: LaneFloat>(
+    geometry: &Geometry<F>,
+    single: &SingleBounce<f64>,
+    table: &AlbedoTable,
+    range: std::ops::Range<usize>,
+    tangents: bool,
+    lanes: &mut Lanes<F>,
+) {
+    let n = range.len();
+    let mf = &single.microfacet;
+    let alpha = Dual64::from_re((mf.ax * mf.ay).sqrt()).derivative();
+    let f0 = f0_with_tangents(&single.fresnel);
+    let oz = &geometry.oz[range];
+    for c in 0..3 {
+        lanes.scale_slope[c].resize(n, F::zero());
+    }
+    for (l, &mu) in oz.iter().enumerate() {
+        let e = table.e(mu.re64(), alpha).max_c(1e-6);
+        let g = (Dual64::from_re(1.0) - e).max_c(0.0) / e;
+        for (c, &(f0, df0_a, df0_b)) in f0.iter().enumerate() {
+            let f = lanes.fresnel[c][l].re64();
+            let scale = 1.0 + f0 * g.re;
+            if tangents {
+                let (a, b) = (&mut lanes.d_fresnel_a[c][l], &mut lanes.d_fresnel_b[c][l]);
+                *a = F::c(a.re64() * scale + f * g.re * df0_a);
+                *b = F::c(b.re64() * scale + f * g.re * df0_b);
+                lanes.scale_slope[c][l] = F::c(f * f0 * g.eps);
+            }
+            lanes.fresnel[c][l] = F::c(f * scale);
+        }
+    }
+}
+
+/// The Fresnel-free lobe `D / (4 den)` of the records in `range`, and its roughness
+/// derivatives when `tangents`.
+#[inline(always)]
+fn lobes<F: LaneFloat>(
+    geometry: &Geometry<F>,
+    single: &SingleBounce<f64>,
+    range: std::ops::Range<usize>,
+    tangents: bool,
+    lanes: &mut Lanes<F>,
+) {
+    let n = range.len();
+    lanes.lobe.resize(n, F::zero());
+    if tangents {
+        lanes.d_ax.resize(n, F::zero());
+        lanes.d_ay.resize(n, F::zero());
+    }
+    match (single.microfacet.ndf, tangents) {
+        (NdfKind::Ggx, false) => ggx_lobes::<F, false>(geometry, single, range, lanes),
+        (NdfKind::Ggx, true) => ggx_lobes::<F, true>(geometry, single, range, lanes),
+        (NdfKind::Beckmann, _) => any_lobes(geometry, single, range, tangents, lanes),
+    }
+}
+
+/// [`lobes`] for GGX: one branch-free loop over the record arrays, which the compiler turns
+/// into SIMD lanes, with one division per record (three with tangents).
+///
+/// With `r = sqrt(z^2 + s^2)`, `|w.z| Lambda = (r - z) / 2` ([`ggx::z_lambda`]), so the
+/// denominators of `G2 / (wi.z wo.z)` factor without a subtraction: correlated
+/// `wi.z wo.z + wo.z zLi + wi.z zLo = (wo.z r_i + wi.z r_o) / 2` (the form of Heitz 2014
+/// eq. 99 that real-time renderers use), uncorrelated `(wi.z + zLi)(wo.z + zLo) =
+/// (r_i + wi.z)(r_o + wo.z) / 4`. With `t = s_h^2 + h.z^2` the lobe is
+/// `D / (4 den) = K / (t^2 q)`: `q = wo.z r_i + wi.z r_o` and `K = 1 / (2 pi ax ay)`
+/// (correlated), `q = (r_i + wi.z)(r_o + wo.z)` and `K = 1 / (pi ax ay)` (uncorrelated).
+/// Derivatives: `d ln D / d ax = 4 h.x^2 / (ax^3 t) - 1 / ax`, `d r / d ax = ax w.x^2 / r`,
+/// and `d ln lobe = d ln D - d ln q`; `1/t` and `1/q` come from the one division
+/// `1 / (t^2 q)`.
+#[inline(always)]
+fn ggx_lobes<F: LaneFloat, const TANGENTS: bool>(
+    geometry: &Geometry<F>,
+    single: &SingleBounce<f64>,
+    range: std::ops::Range<usize>,
+    lanes: &mut Lanes<F>,
+) {
+    let mf = &single.microfacet;
+    let (ax, ay) = (mf.ax, mf.ay);
+    let correlated = single.height == Height::Correlated;
+    let k = F::c(if correlated { 0.5 } else { 1.0 } / (std::f64::consts::PI * ax * ay));
+    let (ax2, ay2) = (F::c(ax * ax), F::c(ay * ay));
+    let (inv_ax2, inv_ay2) = (F::c(1.0 / (ax * ax)), F::c(1.0 / (ay * ay)));
+    // `[a, 1/a, 4/a^3]` of each axis, for `d ln D / d a`.
+    let x_consts = [ax, 1.0 / ax, 4.0 / (ax * ax * ax)].map(F::c);
+    let y_consts = [ay, 1.0 / ay, 4.0 / (ay * ay * ay)].map(F::c);
+    let one = F::one();
+    let n = range.len();
+    let [hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz] = geometry.directions(range);
+    let lobe = &mut lanes.lobe[..n];
+    let tangent_len = if TANGENTS { n } else { 0 };
+    let (d_ax, d_ay) = (
+        &mut lanes.d_ax[..tangent_len],
+        &mut lanes.d_ay[..tangent_len],
+    );
+    for l in 0..n {
+        let t = hx2[l] * inv_ax2 + hy2[l] * inv_ay2 + hz2[l];
+        let (zi, zo) = (iz[l], oz[l]);
+        let ri = (zi * zi + ax2 * ix2[l] + ay2 * iy2[l]).sqrt();
+        let ro = (zo * zo + ax2 * ox2[l] + ay2 * oy2[l]).sqrt();
+        let (ai, ao) = (ri + zi, ro + zo);
+        let q = if correlated {
+            zo * ri + zi * ro
+        } else {
+            ai * ao
+        };
+        let inv = one / (t * t * q);
+        let value = k * inv;
+        lobe[l] = value;
+        if TANGENTS {
+            let (inv_t, inv_q) = (t * q * inv, t * t * inv);
+            let (inv_ri, inv_ro) = (one / ri, one / ro);
+            let by = |[a, inv_a, four_inv_a3]: [F; 3], h2: F, i2: F, o2: F| {
+                let dln_d = four_inv_a3 * h2 * inv_t - inv_a;
+                let (dri, dro) = (a * i2 * inv_ri, a * o2 * inv_ro);
+                let dq = if correlated {
+                    zo * dri + zi * dro
+                } else {
+                    dri * ao + ai * dro
+                };
+                value * (dln_d - dq * inv_q)
+            };
+            d_ax[l] = by(x_consts, hx2[l], ix2[l], ox2[l]);
+            d_ay[l] = by(y_consts, hy2[l], iy2[l], oy2[l]);
+        }
+    }
+}
+
+/// [`lobes`] for any distribution, through the scalar kernel's functions
+/// ([`beckmann::density_stretched`], [`beckmann::z_lambda`]) in `f64`; Beckmann's `exp` and
+/// `erfc` have no SIMD form here, so this loop runs a lane at a time.
+fn any_lobes<F: LaneFloat>(
+    geometry: &Geometry<F>,
+    single: &SingleBounce<f64>,
+    range: std::ops::Range<usize>,
+    tangents: bool,
+    lanes: &mut Lanes<F>,
+) {
+    let mf = &single.microfacet;
+    let (ax, ay) = (mf.ax, mf.ay);
+    let (ax2, ay2) = (ax * ax, ay * ay);
+    let (inv_ax2, inv_ay2) = (1.0 / ax2, 1.0 / ay2);
+    let norm = 0.25 / (ax * ay);
+    let n = range.len();
+    let ndf = mf.ndf;
+    let height = single.height;
+    let arrays = geometry.directions(range);
+    for l in 0..n {
+        let [hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz] = arrays.map(|lane| lane[l].re64());
+        let s2h = hx2 * inv_ax2 + hy2 * inv_ay2;
+        let d1 = match ndf {
+            NdfKind::Ggx => ggx::density_stretched(s2h, hz2.sqrt()),
+            NdfKind::Beckmann => beckmann::density_stretched(s2h, hz2.sqrt()),
+        };
+        let si = (ax2 * ix2 + ay2 * iy2).sqrt();
+        let so = (ax2 * ox2 + ay2 * oy2).sqrt();
+        let (zli, zlo) = match ndf {
+            NdfKind::Ggx => (ggx::z_lambda(iz, si), ggx::z_lambda(oz, so)),
+            NdfKind::Beckmann => (beckmann::z_lambda(iz, si), beckmann::z_lambda(oz, so)),
+        };
+        let den = match height {
+            Height::Correlated => iz * oz + oz * zli + iz * zlo,
+            Height::Uncorrelated => (iz + zli) * (oz + zlo),
+        };
+        let lobe = d1 * norm / den;
+        lanes.lobe[l] = F::c(lobe);
+        if !tangents {
+            continue;
+        }
+        // d ln D1 / d (s_h^2), then the chain through s_h^2 = hx2/ax^2 + hy2/ay^2.
+        let dln_d1 = match ndf {
+            NdfKind::Ggx => -2.0 / (s2h + hz2),
+            NdfKind::Beckmann => -1.0 / hz2,
+        };
+        let dzl_ds = |z: f64, s: f64| -> f64 {
+            if s <= 0.0 {
+                return 0.0;
+            }
+            match ndf {
+                NdfKind::Ggx => s / (2.0 * (z * z + s * s).sqrt()),
+                NdfKind::Beckmann => HALF_INV_SQRT_PI * (-(z * z) / (s * s)).exp(),
+            }
+        };
+        let (gi, go) = (dzl_ds(iz, si), dzl_ds(oz, so));
+        // d s / d a = a w_a^2 / s (zero where s = 0, where gi, go are zero too).
+        let (ri, ro) = (
+            if si > 0.0 { 1.0 / si } else { 0.0 },
+            if so > 0.0 { 1.0 / so } else { 0.0 },
+        );
+        let d_den = |dzli: f64, dzlo: f64| match height {
+            Height::Correlated => oz * dzli + iz * dzlo,
+            Height::Uncorrelated => dzli * (oz + zlo) + (iz + zli) * dzlo,
+        };
+        let dln_lobe = |a: f64, h2: f64, i2: f64, o2: f64| {
+            let dln_d = -1.0 / a + dln_d1 * (-2.0 * h2 / (a * a * a));
+            let dzli = gi * a * i2 * ri;
+            let dzlo = go * a * o2 * ro;
+            dln_d - d_den(dzli, dzlo) / den
+        };
+        lanes.d_ax[l] = F::c(lobe * dln_lobe(ax, hx2, ix2, ox2));
+        lanes.d_ay[l] = F::c(lobe * dln_lobe(ay, hy2, iy2, oy2));
     }
 }
 
 /// `F(cos)` per channel for every record's `cos = wi.h`, and when `tangents` its derivatives
 /// by the Fresnel's parameters (see [`PixelTangents`]): one branch-free loop per Fresnel kind,
-/// through the scalar kernel's own functions.
+/// through the scalar kernel's own functions (in the lanes' precision for the values; the
+/// conductor's derivatives in `Dual64`).
 #[inline(always)]
-fn fresnels(fresnel: &Fresnel<f64>, cos: &[f64], tangents: bool, lanes: &mut Lanes) {
+fn fresnels<F: LaneFloat>(fresnel: &Fresnel<f64>, cos: &[F], tangents: bool, lanes: &mut Lanes<F>) {
     let n = cos.len();
     for c in 0..3 {
-        lanes.fresnel[c].resize(n, 0.0);
+        lanes.fresnel[c].resize(n, F::zero());
         if tangents {
-            lanes.d_fresnel_a[c].resize(n, 0.0);
-            lanes.d_fresnel_b[c].resize(n, 0.0);
+            lanes.d_fresnel_a[c].resize(n, F::zero());
+            lanes.d_fresnel_b[c].resize(n, F::zero());
         }
     }
+    let (zero, one) = (F::zero(), F::one());
+    let unit = |cos: F| {
+        if cos < zero {
+            zero
+        } else if cos > one {
+            one
+        } else {
+            cos
+        }
+    };
     for c in 0..3 {
         let value = &mut lanes.fresnel[c][..n];
         let (by_a, by_b) = if tangents {
@@ -646,38 +817,39 @@ fn fresnels(fresnel: &Fresnel<f64>, cos: &[f64], tangents: bool, lanes: &mut Lan
         match *fresnel {
             Fresnel::White | Fresnel::Dielectric { .. } => {
                 for (v, &cos) in value.iter_mut().zip(cos) {
-                    *v = fresnel.eval(cos).0[c];
+                    *v = F::c(fresnel.eval(cos.re64()).0[c]);
                 }
-                by_a.fill(0.0);
-                by_b.fill(0.0);
+                by_a.fill(zero);
+                by_b.fill(zero);
             }
             Fresnel::Schlick { f0 } => {
-                let f0 = f0.0[c];
+                let f0 = F::c(f0.0[c]);
                 for (v, &cos) in value.iter_mut().zip(cos) {
-                    let m = 1.0 - cos.clamp(0.0, 1.0);
-                    *v = f0 + (1.0 - f0) * (m * m * m * m * m);
+                    let m = one - unit(cos);
+                    *v = f0 + (one - f0) * (m * m * m * m * m);
                 }
                 for (d, &cos) in by_a.iter_mut().zip(cos) {
-                    let m = 1.0 - cos.clamp(0.0, 1.0);
-                    *d = 1.0 - m * m * m * m * m;
+                    let m = one - unit(cos);
+                    *d = one - m * m * m * m * m;
                 }
-                by_b.fill(0.0);
+                by_b.fill(zero);
             }
             Fresnel::Conductor { eta, k } => {
                 let (e, kk) = (eta.0[c], k.0[c]);
                 if tangents {
                     let (e_seed, k_seed) = (Dual64::from_re(e), Dual64::from_re(kk));
                     for (((v, a), b), &cos) in value.iter_mut().zip(by_a).zip(by_b).zip(cos) {
-                        let x = Dual64::from_re(cos.clamp(0.0, 1.0));
+                        let x = Dual64::from_re(unit(cos).re64());
                         let by_eta = fresnel::conductor(x, e_seed.derivative(), k_seed);
                         let by_k = fresnel::conductor(x, e_seed, k_seed.derivative());
-                        *v = by_eta.re;
-                        *a = by_eta.eps;
-                        *b = by_k.eps;
+                        *v = F::c(by_eta.re);
+                        *a = F::c(by_eta.eps);
+                        *b = F::c(by_k.eps);
                     }
                 } else {
+                    let (e, kk) = (F::c(e), F::c(kk));
                     for (v, &cos) in value.iter_mut().zip(cos) {
-                        *v = fresnel::conductor(cos.clamp(0.0, 1.0), e, kk);
+                        *v = fresnel::conductor(unit(cos), e, kk);
                     }
                 }
             }

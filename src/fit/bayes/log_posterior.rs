@@ -45,6 +45,7 @@ use super::sampler::Target;
 use crate::fit::point::objective::Objective;
 use crate::fit::point::params::{sigmoid, ParamSpace};
 use crate::loss::LossKind;
+use crate::render::batch::Precision;
 use crate::shading::ShadingRecords;
 use argmin::core::{CostFunction, Gradient};
 use rand::seq::index::sample;
@@ -237,7 +238,10 @@ impl<'a> LogPosterior<'a> {
         seed: u64,
         noise: Noise,
     ) -> Self {
-        let objective = Objective::new(space, records, kind, seed);
+        // The curvature and the model-error adjustment take central differences of the
+        // likelihood's gradient (step 1e-3), which would amplify the `f32` lanes' rounding of
+        // the tangents (up to 5e-4 relative) into the intervals: the posterior uses `f64` lanes.
+        let objective = Objective::new(space, records, kind, seed).with_precision(Precision::F64);
         let priors = space
             .names()
             .iter()

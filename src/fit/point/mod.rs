@@ -30,6 +30,7 @@ use crate::loss::LossKind;
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::fresnel::reflectivity_edge_tint_from_ior;
 use crate::progress::Progress;
+use crate::render::batch::Precision;
 use crate::render::plan::{PlanSummary, Skips};
 use crate::shading::ShadingRecords;
 use argmin::core::Error as ArgminError;
@@ -93,6 +94,8 @@ pub struct FitOptions {
     pub pyramid: usize,
     /// Work the renders may skip (`--no-skip` switches skips off; see `render::plan`).
     pub skips: Skips,
+    /// Arithmetic of the batch kernel's lanes (`--batch-precision`; default `f32`).
+    pub precision: Precision,
 }
 
 /// The loss of one photo at the fitted parameters.
@@ -247,12 +250,14 @@ fn fit_level(
     let space = options.space;
     let objective = Objective::new(space, records, options.loss, options.seed)
         .with_gradient(options.gradient)
-        .with_skips(options.skips);
+        .with_skips(options.skips)
+        .with_precision(options.precision);
     // Stochastic models: the global start is searched on one render, the local searches use
     // the unbiased pair loss (see `Objective::single_render` and `crate::loss`).
     let screening = Objective::new(space, records, options.loss, options.seed)
         .with_gradient(options.gradient)
         .with_skips(options.skips)
+        .with_precision(options.precision)
         .single_render();
     if objective.pixel_count() == 0 {
         return Err(Error::argument(
@@ -308,7 +313,8 @@ fn fit_level(
         // Each search minimised the pair loss on the same streams and so also chased their
         // noise; rank the results on fresh streams, which that noise does not follow.
         let judge = Objective::new(space, records, options.loss, options.seed.wrapping_add(1))
-            .with_skips(options.skips);
+            .with_skips(options.skips)
+            .with_precision(options.precision);
         for result in &mut results {
             result.0 = judge.loss(&result.1) / judge.loss_from_cost(1.0);
         }

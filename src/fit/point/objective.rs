@@ -24,7 +24,7 @@ use crate::bsdf::{differentiable, BounceCap};
 use crate::fit::point::params::Surface;
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::anchors::Anchors;
-use crate::render::batch::{BatchRecords, Lobe, PixelTangents};
+use crate::render::batch::{BatchRecords, Lobe, PixelTangents, Precision};
 use crate::render::plan::{MultiTerm, PlanSummary, RenderPlan, Skips};
 use crate::render::{
     add_to, render_material, render_material_streams, render_planned_streams, SplitRender,
@@ -88,8 +88,10 @@ pub struct Objective<'a> {
     /// Which work skips the renders may use, and the plan built from them on first use.
     skips: Skips,
     plan: OnceLock<RenderPlan>,
-    /// The records of the loss pixels for the batch kernel, built on first use.
+    /// The records of the loss pixels for the batch kernel, built on first use, and the
+    /// precision of its lanes.
     batch: OnceLock<BatchRecords>,
+    precision: Precision,
     stochastic: bool,
     /// The loss is divided by this, so optimiser tolerances are relative (L2: mean target^2).
     scale: f64,
@@ -137,6 +139,7 @@ impl<'a> Objective<'a> {
             skips: Skips::default(),
             plan: OnceLock::new(),
             batch: OnceLock::new(),
+            precision: Precision::default(),
             stochastic,
             scale,
             evaluations: Arc::new(AtomicUsize::new(0)),
@@ -172,6 +175,7 @@ impl<'a> Objective<'a> {
     /// The same objective with gradients computed by `method` (default: exact where available).
     pub fn with_gradient(mut self, method: GradientMethod) -> Self {
         self.gradient = method;
+        self.batch = OnceLock::new();
         self
     }
 
@@ -179,6 +183,13 @@ impl<'a> Objective<'a> {
     pub fn with_skips(mut self, skips: Skips) -> Self {
         self.skips = skips;
         self.plan = OnceLock::new();
+        self
+    }
+
+    /// The same objective with the batch kernel's lanes in `precision` (default `f32`).
+    pub fn with_precision(mut self, precision: Precision) -> Self {
+        self.precision = precision;
+        self.batch = OnceLock::new();
         self
     }
 
@@ -191,10 +202,18 @@ impl<'a> Objective<'a> {
         })
     }
 
-    /// The batch kernel's records of the loss pixels, built on first use.
+    /// The batch kernel's records of the loss pixels, built on first use. Finite differences
+    /// divide the cost's rounding by their step [`FD_STEP`]: `f32` lanes (6e-8 relative) would
+    /// leave 6e-3 of noise in such a gradient, so a finite-difference objective gets `f64`
+    /// lanes whatever its precision says.
     fn batch(&self) -> &BatchRecords {
-        self.batch
-            .get_or_init(|| BatchRecords::new(self.records, &self.pixels))
+        self.batch.get_or_init(|| {
+            let precision = match self.gradient_method() {
+                GradientMethod::Fd => Precision::F64,
+                GradientMethod::Exact => self.precision,
+            };
+            BatchRecords::with_precision(self.records, &self.pixels, precision)
+        })
     }
 
     /// What the batch kernel renders when a render at `single`'s parameters is the single

@@ -109,7 +109,8 @@ fn check_model(model: Model) {
             let truth = space.material(&random_point(&space, &mut rng));
             let records = synthetic_records(&truth);
             for (k, kind) in LOSSES.into_iter().enumerate() {
-                let objective = Objective::new(space, &records, kind, 3);
+                let objective =
+                    Objective::new(space, &records, kind, 3).with_precision(Precision::F64);
                 assert_eq!(objective.gradient_method(), GradientMethod::Exact);
                 for point in 0..5 {
                     let x = random_point(&space, &mut rng);
@@ -158,7 +159,7 @@ fn turquin_exact_gradient_matches_finite_differences() {
 fn heitz_falls_back_to_finite_differences() {
     let space = ParamSpace::plain(Model::Heitz);
     let records = ShadingRecords::default();
-    let objective = Objective::new(space, &records, LossKind::L2, 0);
+    let objective = Objective::new(space, &records, LossKind::L2, 0).with_precision(Precision::F64);
     assert_eq!(objective.gradient_method(), GradientMethod::Fd);
     assert!(objective.exact_cost_and_gradient(&[0.0; 4]).is_none());
 }
@@ -249,6 +250,7 @@ fn check_pathwise(model: Model) {
             let pixels: Vec<usize> = (0..records.pixel_count()).collect();
             // The exact renderer: the plan's skips have their own tests (render::tests).
             let objective = Objective::new(space, &records, LossKind::L2, 5)
+                .with_precision(Precision::F64)
                 .with_skips(crate::render::plan::Skips::none());
             assert_eq!(objective.gradient_method(), GradientMethod::Exact);
             for point in 0..5 {
@@ -384,7 +386,8 @@ fn batch_split_renders_equal_the_generic_render_path() {
         let x = random_point(&space, &mut rng);
         let truth = space.material(&x);
         let records = pinhole_records(&truth);
-        let objective = Objective::new(space, &records, LossKind::L2, 3);
+        let objective =
+            Objective::new(space, &records, LossKind::L2, 3).with_precision(Precision::F64);
         let material = space.material(&x);
         let plan = objective.plan();
         let summary = plan.summary(&material);
