@@ -27,6 +27,12 @@
 //!   2%) and as a z-score against both standard errors, which is what exposes a bias. Analytic
 //!   models have no sampling error, so their reference is the same formula in f64 and the
 //!   tested value the f32 evaluation: the deviation shows where a formula loses precision.
+//!
+//! The models a fit renders through the batch kernel (`single`, `turquin`) also run their
+//! surfaces through it ([`batch`]): bad numbers in its values and tangents, and its worst
+//! deviation from this sweep's scalar kernel.
+
+pub mod batch;
 
 use crate::albedo::{directional_albedo, mean_value, rng_stream, Adjoint};
 use crate::bsdf::{differentiable, BounceCap, Brdf, Model};
@@ -163,7 +169,17 @@ pub struct ModelReport {
     pub worst_z_at: Option<String>,
     /// What the deviation compares.
     pub reference: String,
+    /// The batch kernel's sweep, for the models it serves ([`batch::serves`]).
+    pub batch: Option<batch::BatchReport>,
     pub seconds: f64,
+}
+
+impl ModelReport {
+    /// NaN, infinite and negative numbers of the scalar sweep and batch values (the batch
+    /// kernel's non-finite tangents are reported apart).
+    pub fn bad_numbers(&self) -> usize {
+        self.nan + self.inf + self.negative + self.batch.as_ref().map_or(0, |b| b.bad_values())
+    }
 }
 
 /// The surfaces of the sweep.
@@ -551,6 +567,7 @@ pub fn stress_model(
         } else {
             "f32 vs f64, same formula".into()
         },
+        batch: batch::serves(model).then(|| batch::sweep(model, size)),
         seconds: start.elapsed().as_secs_f64(),
     }
 }

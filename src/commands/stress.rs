@@ -1,6 +1,7 @@
 //! `bouncefit stress`: the numerical stress sweep of [`crate::stress`] over the chosen models, as
 //! a table or (`--json`) as `{"models": [...]}`. The exit status is 1 when any model returned a
-//! NaN, infinite or negative number, so CI and scripts can gate on it.
+//! NaN, infinite or negative number (values of the batch kernel included), so CI and scripts can
+//! gate on it; the batch kernel's non-finite tangents are reported and warned about on stderr.
 
 use crate::bsdf::Model;
 use crate::error::Result;
@@ -58,11 +59,21 @@ pub fn run_stress(args: &StressArgs) -> Result<bool> {
     } else {
         print!("{}", table(&reports));
     }
-    let clean = reports.iter().all(|r| r.nan + r.inf + r.negative == 0);
+    let clean = reports.iter().all(|r| r.bad_numbers() == 0);
     if !clean {
         eprintln!(
             "stress: NaN, infinite or negative values found (see the first bad numbers above)"
         );
+    }
+    for r in &reports {
+        if let Some(b) = r.batch.as_ref().filter(|b| b.tangent_nonfinite > 0) {
+            eprintln!(
+                "stress: warning: {}: batch kernel: {} non-finite tangents, first: {}",
+                r.model,
+                b.tangent_nonfinite,
+                b.first_bad_tangent.as_deref().unwrap_or_default()
+            );
+        }
     }
     Ok(clean)
 }
@@ -103,6 +114,31 @@ fn table(reports: &[ModelReport]) -> String {
     for r in reports {
         if let Some(bad) = &r.first_bad {
             out += &format!("{}: first bad number: {bad}\n", r.model);
+        }
+        if let Some(b) = &r.batch {
+            out += &format!(
+                "{}: batch kernel: {} evaluations ({} of {} configurations above the horizon), nan {} inf {} neg {}, non-finite tangents {}/{}; worst deviation from the scalar kernel {:.3e} at {}\n",
+                r.model,
+                b.evaluations,
+                b.records,
+                b.configurations,
+                b.nan,
+                b.inf,
+                b.negative,
+                b.tangent_nonfinite,
+                b.tangents,
+                b.worst_rel_dev,
+                b.worst_rel_dev_at
+            );
+            if let Some(bad) = &b.first_bad {
+                out += &format!("{}: batch kernel: first bad number: {bad}\n", r.model);
+            }
+            if let Some(bad) = &b.first_bad_tangent {
+                out += &format!(
+                    "{}: batch kernel: first non-finite tangent: {bad}\n",
+                    r.model
+                );
+            }
         }
         for v in &r.energy_violations_at {
             out += &format!("{}: white albedo above 1 + 3 se: {v}\n", r.model);
