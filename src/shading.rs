@@ -114,6 +114,28 @@ impl ShadingRecords {
         self.weight.len()
     }
 
+    /// Records of raw direction pairs `(wi, wo)` without a capture: one photo `stem` of one
+    /// row, one pixel per pair with one sub-sample of unit irradiance, so a render returns `f`
+    /// (1/sr) of each pair.
+    pub fn of_pairs(stem: &str, pairs: &[([f64; 3], [f64; 3])]) -> ShadingRecords {
+        let n = pairs.len();
+        ShadingRecords {
+            photos: vec![PhotoSpan {
+                stem: stem.into(),
+                width: n,
+                height: 1,
+                first_pixel: 0,
+            }],
+            samples_per_pixel: 1,
+            wi: pairs.iter().map(|p| p.0).collect(),
+            wo: pairs.iter().map(|p| p.1).collect(),
+            irradiance: vec![[1.0; 3]; n],
+            target: vec![[0.0; 3]; n],
+            weight: vec![1.0; n],
+            ..ShadingRecords::default()
+        }
+    }
+
     /// The same records with the loss weight of every photo outside `keep` (indices into
     /// `photos`) set to 0: fits and losses on the result see only the kept photos, while pixel
     /// indices, and so the random streams of stochastic models, stay those of the full set.

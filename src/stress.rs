@@ -27,6 +27,14 @@
 //!   2%) and as a z-score against both standard errors, which is what exposes a bias. Analytic
 //!   models have no sampling error, so their reference is the same formula in f64 and the
 //!   tested value the f32 evaluation: the deviation shows where a formula loses precision.
+//!
+//! The models a fit renders through the batch kernel (`single`, `turquin`) also run their
+//! surfaces through it ([`batch`]): bad numbers in its values and tangents, and its worst
+//! deviation from this sweep's scalar kernel.
+
+pub mod batch;
+
+use crate::render::batch::Precision;
 
 use crate::albedo::{directional_albedo, mean_value, rng_stream, Adjoint};
 use crate::bsdf::{differentiable, BounceCap, Brdf, Model};
@@ -163,7 +171,21 @@ pub struct ModelReport {
     pub worst_z_at: Option<String>,
     /// What the deviation compares.
     pub reference: String,
+    /// The batch kernel's sweep in each lane precision, for the models it serves
+    /// ([`batch::serves`]); empty for the others.
+    pub batch: Vec<batch::BatchReport>,
     pub seconds: f64,
+}
+
+impl ModelReport {
+    /// NaN, infinite and negative numbers of the scalar sweep, and the batch kernel's bad
+    /// values and non-finite tangents.
+    pub fn bad_numbers(&self) -> usize {
+        self.nan
+            + self.inf
+            + self.negative
+            + self.batch.iter().map(|b| b.bad_numbers()).sum::<usize>()
+    }
 }
 
 /// The surfaces of the sweep.
@@ -550,6 +572,13 @@ pub fn stress_model(
             format!("64 samples vs {} samples, f64", size.reference_samples())
         } else {
             "f32 vs f64, same formula".into()
+        },
+        batch: if batch::serves(model) {
+            [Precision::F32, Precision::F64]
+                .map(|precision| batch::sweep(model, size, precision))
+                .to_vec()
+        } else {
+            Vec::new()
         },
         seconds: start.elapsed().as_secs_f64(),
     }

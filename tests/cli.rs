@@ -439,6 +439,28 @@ fn stress_quick_json_reports_every_model_clean() {
         for key in ["nan", "inf", "negative"] {
             assert_eq!(m[key], 0, "{}: {key}: {}", m["model"], m["first_bad"]);
         }
+        // The batch kernel's part, for the models a fit renders through it, in both lane
+        // precisions: clean values and tangents, rounding-level agreement with the scalar
+        // kernel (the bounds of src/stress/batch.rs).
+        let batch = m["batch"].as_array().unwrap();
+        if m["model"] == "single" || m["model"] == "turquin" {
+            let precisions: Vec<&str> = batch
+                .iter()
+                .map(|b| b["precision"].as_str().unwrap())
+                .collect();
+            assert_eq!(precisions, ["f32", "f64"], "{}", m["model"]);
+            for b in batch {
+                assert!(b["evaluations"].as_u64().unwrap() > 1000, "{b}");
+                for key in ["nan", "inf", "negative", "tangent_nonfinite"] {
+                    assert_eq!(b[key], 0, "{}: batch {key}: {b}", m["model"]);
+                }
+                assert!(b["tangents"].as_u64().unwrap() > 1000, "{b}");
+                let bound = if b["precision"] == "f32" { 2e-5 } else { 1e-6 };
+                assert!(b["worst_rel_dev"].as_f64().unwrap() < bound, "{b}");
+            }
+        } else {
+            assert!(batch.is_empty(), "{}: {:?}", m["model"], batch);
+        }
     }
     // Bitterli's recurrences take their fallback somewhere in the sweep (grazing, equal Lambdas).
     let bitterli = models.iter().find(|m| m["model"] == "bitterli").unwrap();

@@ -20,7 +20,7 @@ use crate::material::Material;
 use crate::microfacet::{Height, NdfKind};
 use crate::render::batch::{BatchRecords, Precision};
 use crate::scalar::Vec3;
-use crate::shading::{PhotoSpan, ShadingRecords};
+use crate::shading::ShadingRecords;
 use serde::Serialize;
 use std::hint::black_box;
 use std::time::Instant;
@@ -54,22 +54,11 @@ fn material() -> Material {
 
 /// One pixel per pair, one sub-sample each, unit irradiance.
 fn records(pairs: usize, seed: u64) -> ShadingRecords {
-    let configs = configurations(pairs, seed);
-    ShadingRecords {
-        photos: vec![PhotoSpan {
-            stem: "kernel".into(),
-            width: pairs,
-            height: 1,
-            first_pixel: 0,
-        }],
-        samples_per_pixel: 1,
-        wi: configs.iter().map(|c| [c.wi.x, c.wi.y, c.wi.z]).collect(),
-        wo: configs.iter().map(|c| [c.wo.x, c.wo.y, c.wo.z]).collect(),
-        irradiance: vec![[1.0; 3]; pairs],
-        target: vec![[0.0; 3]; pairs],
-        weight: vec![1.0; pairs],
-        ..ShadingRecords::default()
-    }
+    let pairs: Vec<_> = configurations(pairs, seed)
+        .iter()
+        .map(|c| ([c.wi.x, c.wi.y, c.wi.z], [c.wo.x, c.wo.y, c.wo.z]))
+        .collect();
+    ShadingRecords::of_pairs("kernel", &pairs)
 }
 
 /// Thread CPU ns per pair of `work` over `pairs` pairs, repeated for at least `seconds`.

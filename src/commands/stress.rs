@@ -1,6 +1,7 @@
 //! `bouncefit stress`: the numerical stress sweep of [`crate::stress`] over the chosen models, as
 //! a table or (`--json`) as `{"models": [...]}`. The exit status is 1 when any model returned a
-//! NaN, infinite or negative number, so CI and scripts can gate on it.
+//! NaN, infinite or negative number (the batch kernel's values included, and its non-finite
+//! tangents), so CI and scripts can gate on it.
 
 use crate::bsdf::Model;
 use crate::error::Result;
@@ -58,7 +59,7 @@ pub fn run_stress(args: &StressArgs) -> Result<bool> {
     } else {
         print!("{}", table(&reports));
     }
-    let clean = reports.iter().all(|r| r.nan + r.inf + r.negative == 0);
+    let clean = reports.iter().all(|r| r.bad_numbers() == 0);
     if !clean {
         eprintln!(
             "stress: NaN, infinite or negative values found (see the first bad numbers above)"
@@ -103,6 +104,32 @@ fn table(reports: &[ModelReport]) -> String {
     for r in reports {
         if let Some(bad) = &r.first_bad {
             out += &format!("{}: first bad number: {bad}\n", r.model);
+        }
+        for b in &r.batch {
+            out += &format!(
+                "{}: batch kernel ({:?} lanes): {} evaluations ({} of {} configurations above the horizon), nan {} inf {} neg {}, non-finite tangents {}/{}; worst deviation from the scalar kernel {:.3e} at {}\n",
+                r.model,
+                b.precision,
+                b.evaluations,
+                b.records,
+                b.configurations,
+                b.nan,
+                b.inf,
+                b.negative,
+                b.tangent_nonfinite,
+                b.tangents,
+                b.worst_rel_dev,
+                b.worst_rel_dev_at
+            );
+            if let Some(bad) = &b.first_bad {
+                out += &format!("{}: batch kernel: first bad number: {bad}\n", r.model);
+            }
+            if let Some(bad) = &b.first_bad_tangent {
+                out += &format!(
+                    "{}: batch kernel: first non-finite tangent: {bad}\n",
+                    r.model
+                );
+            }
         }
         for v in &r.energy_violations_at {
             out += &format!("{}: white albedo above 1 + 3 se: {v}\n", r.model);
