@@ -41,7 +41,9 @@ within 1% and F0 (normal-incidence reflectance of its eta, k) within 0.01 in eve
 Before fitting, Mitsuba renders each scene at the truth (`SANITY_SPP`) and the mean relative
 difference to the set's photos is printed: the scenes must render the photos being fitted. Then
 two tables with the ratios of bouncefit to Mitsuba 3 (below 1: bouncefit is faster), and the
-machine's load average before and after.
+machine's load average before and after. Fits report wall time and CPU time (user + system over
+all threads: `getrusage` of the `bouncefit` child, `time.process_time` around each Mitsuba
+iteration); on a machine shared with other work the CPU time moves less than the wall time.
 
 Dr.Jit 1.5 emits the `fmaximum` intrinsic, which LLVM 14 and 15 cannot compile ("Cannot select");
 install Debian's `libllvm19` (`apt-get install libllvm19`). The script points Dr.Jit at the
@@ -51,6 +53,7 @@ newest `libLLVM-1[6-9]` it finds unless `DRJIT_LIBLLVM_PATH` is set.
 import glob
 import json
 import os
+import resource
 import statistics
 import subprocess
 import tempfile
@@ -141,16 +144,24 @@ def bouncefit_kernel():
 
 
 def bouncefit_fit(folder, out):
-    """`bouncefit fit` of the set, whole process, FIT_RUNS times: (median seconds, alpha, F0)."""
+    """`bouncefit fit` of the set, whole process, FIT_RUNS times: the median (wall, CPU) seconds,
+    alpha and F0."""
     env = dict(os.environ, RAYON_NUM_THREADS=str(FIT_THREADS))
-    times = []
+    walls, cpus = [], []
     for _ in range(FIT_RUNS):
+        cpu = children_cpu()
         start = time.perf_counter()
         subprocess.run([binary(), "fit", folder, "-o", out, "--force", "--quiet"],
                        check=True, capture_output=True, cwd=ROOT, env=env)
-        times.append(time.perf_counter() - start)
+        walls.append(time.perf_counter() - start)
+        cpus.append(children_cpu() - cpu)
     fit = json.loads(Path(out).read_text())
-    return statistics.median(times), fit["alpha"][0], fit["f0"]
+    return (statistics.median(walls), statistics.median(cpus)), fit["alpha"][0], fit["f0"]
+
+
+def children_cpu():
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 class MitsubaFit:
@@ -181,14 +192,15 @@ class MitsubaFit:
         return dr.sqrt(dr.maximum(k2, 0.0))
 
     def run(self, iterations, truth_alpha, truth_f0):
-        """Adam from the neutral start: (summed seconds per iteration, per-iteration records)."""
+        """Adam from the neutral start: summed (wall, CPU) seconds of the iterations, and per
+        iteration ((wall, CPU) so far, alpha, F0, criterion met)."""
         opt = mi.ad.Adam(lr=1.0, beta_1=BETAS[0], beta_2=BETAS[1])
         opt["alpha"] = mi.Float(START["alpha"])
         opt["f0"] = mi.Color3f(START["f0"])
         opt["eta"] = mi.Color3f(START["eta"])
-        elapsed, records = 0.0, []
+        wall, cpu, records = 0.0, 0.0, []
         for iteration in range(iterations):
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             for name, rate in LEARNING_RATES.items():
                 opt.set_learning_rate({name: rate * DECAY**iteration})
             k = self.conductor(opt["f0"], opt["eta"])
@@ -207,15 +219,17 @@ class MitsubaFit:
             opt["f0"] = dr.clip(opt["f0"], 0.02, 0.98)
             dr.eval(opt["alpha"], opt["f0"], opt["eta"])
             dr.sync_thread()
-            elapsed += time.perf_counter() - start
+            wall += time.perf_counter() - start
+            cpu += time.process_time() - start_cpu
             alpha = float(opt["alpha"].numpy()[0])
             f0 = np.array(opt["f0"], dtype=np.float64).ravel()
-            records.append((elapsed, alpha, f0, accurate(alpha, f0, truth_alpha, truth_f0)))
-        return elapsed, records
+            records.append(((wall, cpu), alpha, f0, accurate(alpha, f0, truth_alpha, truth_f0)))
+        return (wall, cpu), records
 
 
 def time_to_criterion(records):
-    """Summed time up to the iteration from which every later iterate meets the criterion."""
+    """Summed (wall, CPU) time up to the iteration from which every later iterate meets the
+    criterion."""
     reached = None
     for elapsed, _, _, ok in records:
         if ok and reached is None:
@@ -236,13 +250,13 @@ def main():
         folder, material = exported_scenes(tmp, SET)
         truth_alpha = material["alpha"][0]
         truth_f0 = normal_reflectance(material["fresnel"]["eta"], material["fresnel"]["k"])
-        fit_seconds, fit_alpha, fit_f0 = bouncefit_fit(folder, tmp / "fit.json")
+        fit_time, fit_alpha, fit_f0 = bouncefit_fit(folder, tmp / "fit.json")
 
         dr.set_thread_count(FIT_THREADS)
         mitsuba = MitsubaFit(tmp / "scenes", folder)
         sanity = mitsuba.sanity()
         mitsuba.run(WARMUP, truth_alpha, truth_f0)
-        loop_seconds, records = mitsuba.run(ITERATIONS, truth_alpha, truth_f0)
+        loop_time, records = mitsuba.run(ITERATIONS, truth_alpha, truth_f0)
     reached = time_to_criterion(records)
     _, last_alpha, last_f0, last_ok = records[-1]
     ours_ok = accurate(fit_alpha, fit_f0, truth_alpha, truth_f0)
@@ -265,17 +279,17 @@ def main():
         print(f"{name:<64} {ns:>8.2f} {ns / theirs_ns:>10.3f}")
     print()
     fits = [
-        (f"bouncefit fit, whole process (median of {FIT_RUNS})", fit_seconds),
-        (f"Mitsuba 3 inverse rendering, {ITERATIONS} iterations at {SPP} spp", loop_seconds),
+        (f"bouncefit fit, whole process (median of {FIT_RUNS})", fit_time),
+        (f"Mitsuba 3 inverse rendering, {ITERATIONS} iterations at {SPP} spp", loop_time),
         ("Mitsuba 3 inverse rendering, up to alpha 1% and F0 0.01", reached),
     ]
-    print(f"{f'fit of {SET}, {FIT_THREADS} threads':<64} {'s':>8} {'bouncefit /':>12}")
+    print(f"{f'fit of {SET}, {FIT_THREADS} threads':<60} {'wall s':>8} {'CPU s':>8} {'bouncefit / (wall, CPU)':>24}")
     for name, seconds in fits:
         if seconds is None:
-            print(f"{name:<64} {'never':>8}")
+            print(f"{name:<60} {'never':>8}")
         else:
-            print(f"{name:<64} {seconds:>8.3f} {fit_seconds / seconds:>12.3f}")
-
+            ratios = f"{fit_time[0] / seconds[0]:.3f}, {fit_time[1] / seconds[1]:.3f}"
+            print(f"{name:<60} {seconds[0]:>8.3f} {seconds[1]:>8.3f} {ratios:>24}")
 
 if __name__ == "__main__":
     main()
