@@ -67,6 +67,21 @@ pub enum Precision {
     F64,
 }
 
+impl Precision {
+    /// The lanes a fit of `model` uses unless told otherwise: `f32` for `single` and
+    /// `turquin`; `f64` where the kernel adds a lobe (`kulla-conty`). Measured: with `f32`
+    /// lanes the cost's rounding stalls L-BFGS's last line searches, and a `kulla-conty` fit took
+    /// 288 evaluations against 67 with `f64` lanes on `aluminium-pinhole` (conductor) and 180
+    /// against 110 on `copper-flash`, to the same alpha; `f64` lanes cost less than that
+    /// difference (docs/speed.md).
+    pub fn default_for(model: Model) -> Precision {
+        match model {
+            Model::KullaConty => Precision::F64,
+            _ => Precision::default(),
+        }
+    }
+}
+
 /// A lane's number type, `f32` or `f64`: the kernel's loops are written once over it.
 pub trait LaneFloat: Real + Default + PartialOrd + 'static {
     /// The thread's scratch lanes of this type.

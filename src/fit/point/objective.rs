@@ -137,7 +137,7 @@ impl<'a> Objective<'a> {
             skips: Skips::default(),
             plan: OnceLock::new(),
             batch: OnceLock::new(),
-            precision: Precision::default(),
+            precision: Precision::default_for(space.model),
             stochastic,
             scale,
             evaluations: Arc::new(AtomicUsize::new(0)),
