@@ -1,5 +1,6 @@
 //! The batch kernel (issue #15 item 1): the single-bounce term and the diffuse term of every
-//! pixel of a fit, evaluated over structure-of-arrays records in SIMD lanes, with the
+//! pixel of a fit, and the multiple-bounce term of the models in [`Added`] (Turquin's scale,
+//! Kulla & Conty's lobe), evaluated over structure-of-arrays records in SIMD lanes, with the
 //! derivatives of the prediction with respect to the kernel's parameters from the same pass.
 //!
 //! A fit renders the same sub-samples hundreds of times at different parameters, so everything
@@ -666,32 +667,32 @@ fn weigh<F: LaneFloat, const ADDED: bool>(
         let (q_ax, q_ay) = (&lanes.added_ax[..added_len], &lanes.added_ay[..added_len]);
         for l in 0..n {
             let (wl, wf) = (w[l] * lobe[l], w[l] * f[l]);
-            a[l] = a[l] * wl;
-            b[l] = b[l] * wl;
+            a[l] *= wl;
+            b[l] *= wl;
             by_ax[l] = wf * d_ax[l];
             by_ay[l] = wf * d_ay[l];
             if ADDED {
                 let wq = w[l] * q[l];
-                a[l] = a[l] + wq * phi_a;
-                b[l] = b[l] + wq * phi_b;
-                by_ax[l] = by_ax[l] + w[l] * (phi * q_ax[l] + q[l] * phi_ax);
-                by_ay[l] = by_ay[l] + w[l] * (phi * q_ay[l] + q[l] * phi_ay);
+                a[l] += wq * phi_a;
+                b[l] += wq * phi_b;
+                by_ax[l] += w[l] * (phi * q_ax[l] + q[l] * phi_ax);
+                by_ay[l] += w[l] * (phi * q_ay[l] + q[l] * phi_ay);
             }
         }
         if let Some(dalpha) = scaled {
             let slope = &lanes.scale_slope[c][..n];
             for l in 0..n {
                 let wl = w[l] * lobe[l] * slope[l];
-                by_ax[l] = by_ax[l] + wl * dalpha[0];
-                by_ay[l] = by_ay[l] + wl * dalpha[1];
+                by_ax[l] += wl * dalpha[0];
+                by_ay[l] += wl * dalpha[1];
             }
         }
     }
     let f = &mut lanes.fresnel[c][..n];
     for l in 0..n {
-        f[l] = f[l] * (w[l] * lobe[l]);
+        f[l] *= w[l] * lobe[l];
         if ADDED {
-            f[l] = f[l] + w[l] * q[l] * phi;
+            f[l] += w[l] * q[l] * phi;
         }
     }
 }
