@@ -103,7 +103,7 @@ fn f32_lanes_move_fits_by_less_than_a_thousandth_in_alpha() {
                     projection: true,
                     pyramid: 1,
                     skips: Default::default(),
-                    precision,
+                    precision: Some(precision),
                 };
                 fit_model(&records, &options).unwrap()
             };

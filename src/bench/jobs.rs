@@ -367,7 +367,7 @@ mod tests {
             projection: true,
             pyramid: 1,
             skips: Default::default(),
-            precision: Default::default(),
+            precision: None,
         };
         let row = fit_job(&records, Some(&truth), &options).unwrap();
         let alpha = row.alpha.unwrap();

@@ -9,6 +9,7 @@
 //! | `scalar_ns_per_eval` | thread CPU time per [`crate::bsdf::Brdf::eval`] of `single` |
 //! | `batch_ns_per_eval` | thread CPU time per pair of [`BatchRecords::render`] (one record per pixel) with `f32` lanes, the fits' default, geometry prepared once as a fit prepares it |
 //! | `batch_f64_ns_per_eval` | the same with `f64` lanes |
+//! | `kulla_conty_ns_per_eval`, `kulla_conty_f64_ns_per_eval` | the same two for `kulla-conty` (single lobe and compensation lobe, [`Lobe::of`]) at the same material: the cost of its added lobe in the kernel |
 //! | `batch_prepare_ns_per_eval` | thread CPU time per pair of [`BatchRecords::new`]: the one-off cost, for comparison with kernels that take raw direction pairs |
 //! | `speedup` | `scalar_ns_per_eval / batch_ns_per_eval` |
 
@@ -18,7 +19,7 @@ use crate::albedo::rng_stream;
 use crate::bsdf::Model;
 use crate::material::Material;
 use crate::microfacet::{Height, NdfKind};
-use crate::render::batch::{BatchRecords, Precision};
+use crate::render::batch::{BatchRecords, Lobe, Precision};
 use crate::scalar::Vec3;
 use crate::shading::ShadingRecords;
 use serde::Serialize;
@@ -36,6 +37,8 @@ pub struct KernelRow {
     pub scalar_ns_per_eval: f64,
     pub batch_ns_per_eval: f64,
     pub batch_f64_ns_per_eval: f64,
+    pub kulla_conty_ns_per_eval: f64,
+    pub kulla_conty_f64_ns_per_eval: f64,
     pub batch_prepare_ns_per_eval: f64,
     pub speedup: f64,
 }
@@ -97,12 +100,20 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
                 black_box(brdf.eval(wi, wo, &mut rng));
             }
         });
-        let [batch_ns, batch_f64_ns] = [Precision::F32, Precision::F64].map(|precision| {
+        let batch_ns = |model: Model, precision: Precision| {
             let batch = BatchRecords::with_precision(&records, &all, precision);
+            let lobe = Lobe::of(model, &single).expect("a model the kernel serves");
             per_pair(pairs, seconds, || {
-                black_box(batch.render(black_box(&single), [0.0; 3]));
+                black_box(batch.render(black_box(lobe), [0.0; 3]));
             })
-        });
+        };
+        let [batch_ns, batch_f64_ns, kulla_conty_ns, kulla_conty_f64_ns] = [
+            (Model::Single, Precision::F32),
+            (Model::Single, Precision::F64),
+            (Model::KullaConty, Precision::F32),
+            (Model::KullaConty, Precision::F64),
+        ]
+        .map(|(model, precision)| batch_ns(model, precision));
         let prepare = per_pair(pairs, seconds, || {
             black_box(BatchRecords::new(black_box(&records), &all));
         });
@@ -111,6 +122,8 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
             scalar_ns_per_eval: scalar,
             batch_ns_per_eval: batch_ns,
             batch_f64_ns_per_eval: batch_f64_ns,
+            kulla_conty_ns_per_eval: kulla_conty_ns,
+            kulla_conty_f64_ns_per_eval: kulla_conty_f64_ns,
             batch_prepare_ns_per_eval: prepare,
             speedup: scalar / batch_ns,
         }

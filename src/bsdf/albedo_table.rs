@@ -14,7 +14,8 @@ use crate::microfacet::{Height, NdfKind};
 use crate::scalar::Real;
 use std::sync::OnceLock;
 
-const MU_COUNT: usize = 48;
+/// Nodes of the `mu` grid.
+pub const MU_COUNT: usize = 48;
 const MU_MIN: f64 = 1e-5;
 const ALPHA_COUNT: usize = 80;
 const ALPHA_MIN: f64 = 1e-4;
@@ -111,15 +112,34 @@ impl AlbedoTable {
         log_cell(alpha, ALPHA_MIN, ALPHA_MAX, ALPHA_COUNT)
     }
 
-    /// `E(mu, alpha)`: white directional albedo of `single` at incidence cosine `mu`.
-    pub fn e<T: Real>(&self, mu: f64, alpha: T) -> T {
-        let (i, t) = Self::alpha_cell(alpha);
+    /// Position of `mu` on the `mu` grid: the lower node `j` and the weight `u` of node
+    /// `j + 1` (linear in `sqrt(mu)`, clamped to the grid). It depends on the direction only,
+    /// so the batch kernel computes it once per record.
+    pub fn mu_cell(mu: f64) -> (usize, f64) {
         let root_min = MU_MIN.sqrt();
         let s = ((mu.clamp(MU_MIN, 1.0).sqrt() - root_min) / (1.0 - root_min)
             * (MU_COUNT - 1) as f64)
             .min((MU_COUNT - 1) as f64 - 1e-9);
         let j = s as usize;
-        let u = s - j as f64;
+        (j, s - j as f64)
+    }
+
+    /// `ln E` at every node of the `mu` grid at roughness `alpha` (interpolated in `ln alpha`
+    /// as [`AlbedoTable::e`] does): with [`AlbedoTable::mu_cell`], `ln E(mu, alpha)` is
+    /// `row[j] (1 - u) + row[j + 1] u`. The batch kernel reads every record's `E` at one
+    /// roughness from this row (a dual number carries `d ln E / d alpha`).
+    pub fn ln_e_row<T: Real>(&self, alpha: T) -> [T; MU_COUNT] {
+        let (i, t) = Self::alpha_cell(alpha);
+        std::array::from_fn(|j| {
+            T::c(self.ln_e[i * MU_COUNT + j]) * (T::one() - t)
+                + T::c(self.ln_e[(i + 1) * MU_COUNT + j]) * t
+        })
+    }
+
+    /// `E(mu, alpha)`: white directional albedo of `single` at incidence cosine `mu`.
+    pub fn e<T: Real>(&self, mu: f64, alpha: T) -> T {
+        let (i, t) = Self::alpha_cell(alpha);
+        let (j, u) = Self::mu_cell(mu);
         let at = |a: usize| {
             self.ln_e[a * MU_COUNT + j] * (1.0 - u) + self.ln_e[a * MU_COUNT + j + 1] * u
         };

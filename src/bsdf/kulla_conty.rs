@@ -73,6 +73,18 @@ impl<T: Real> KullaConty<T> {
         }
     }
 
+    /// `F_ms / (pi (1 - E_avg))` per channel: the lobe is this times
+    /// `(1 - E(mu_i)) (1 - E(mu_o))` (Kulla & Conty 2017, the compensation lobe with its Fresnel
+    /// colouring); zero when the surface loses no energy.
+    pub fn lobe_scale(&self) -> Rgb<T> {
+        self.lobe_scale
+    }
+
+    /// The white albedo table the lobe reads (at `sqrt(ax ay)`).
+    pub fn table(&self) -> &'static AlbedoTable {
+        self.table
+    }
+
     /// The compensation lobe `f_ms`, 1/sr.
     pub fn compensation(&self, wi: Vec3<T>, wo: Vec3<T>) -> Rgb<T> {
         if wi.z.re64() <= 0.0 || wo.z.re64() <= 0.0 {

@@ -1,5 +1,6 @@
 //! The batch kernel (issue #15 item 1): the single-bounce term and the diffuse term of every
-//! pixel of a fit, evaluated over structure-of-arrays records in SIMD lanes, with the
+//! pixel of a fit, and the multiple-bounce term of the models in [`Added`] (Turquin's scale,
+//! Kulla & Conty's lobe), evaluated over structure-of-arrays records in SIMD lanes, with the
 //! derivatives of the prediction with respect to the kernel's parameters from the same pass.
 //!
 //! A fit renders the same sub-samples hundreds of times at different parameters, so everything
@@ -28,11 +29,13 @@
 //! Pixel sums add the sub-samples of a pixel in index order inside one task, so results are
 //! bit-identical for any thread count.
 
-use crate::bsdf::albedo_table::AlbedoTable;
+use crate::bsdf::albedo_table::{AlbedoTable, MU_COUNT};
+use crate::bsdf::kulla_conty::KullaConty;
 use crate::bsdf::single::SingleBounce;
+use crate::bsdf::Model;
 use crate::microfacet::fresnel::{self, Fresnel};
-use crate::microfacet::{beckmann, ggx, Height, NdfKind};
-use crate::scalar::Real;
+use crate::microfacet::{beckmann, ggx, Height, Microfacet, NdfKind};
+use crate::scalar::{Real, Rgb};
 use crate::shading::ShadingRecords;
 use num_dual::Dual64;
 use rayon::prelude::*;
@@ -63,6 +66,21 @@ pub enum Precision {
     F32,
     /// Double precision lanes: the reference the `f32` lanes are measured against.
     F64,
+}
+
+impl Precision {
+    /// The lanes a fit of `model` uses unless told otherwise: `f32` for `single` and
+    /// `turquin`; `f64` where the kernel adds a lobe (`kulla-conty`). Measured: with `f32`
+    /// lanes the cost's rounding stalls L-BFGS's last line searches, and a `kulla-conty` fit took
+    /// 288 evaluations against 67 with `f64` lanes on `aluminium-pinhole` (conductor) and 180
+    /// against 110 on `copper-flash`, to the same alpha; `f64` lanes cost less than that
+    /// difference (docs/speed.md).
+    pub fn default_for(model: Model) -> Precision {
+        match model {
+            Model::KullaConty => Precision::F64,
+            _ => Precision::default(),
+        }
+    }
 }
 
 /// A lane's number type, `f32` or `f64`: the kernel's loops are written once over it.
@@ -107,6 +125,10 @@ struct Geometry<F> {
     oz: Vec<F>,
     /// `wi.h`, the angle the Fresnel term sees.
     cos_d: Vec<F>,
+    /// The cells of `wi.z` and `wo.z` on the albedo tables' `mu` grid
+    /// ([`AlbedoTable::mu_cell`]): lower node and the weight of the upper one.
+    mu_node: [Vec<u32>; 2],
+    mu_weight: [Vec<F>; 2],
     /// Irradiance of each record over the pixel's sub-sample count, per channel.
     weight: [Vec<F>; 3],
 }
@@ -129,6 +151,11 @@ impl<F: LaneFloat> Geometry<F> {
         ];
         for (lane, value) in lanes {
             lane.push(F::c(value));
+        }
+        for (side, mu) in [wi[2], wo[2]].into_iter().enumerate() {
+            let (node, weight) = AlbedoTable::mu_cell(mu);
+            self.mu_node[side].push(node as u32);
+            self.mu_weight[side].push(F::c(weight));
         }
         for (lane, w) in self.weight.iter_mut().zip(weight) {
             lane.push(F::c(w));
@@ -184,22 +211,66 @@ pub struct Lanes<F> {
     /// Per channel, with Turquin's compensation: `F F0 dg/dalpha` (see
     /// [`compensate`]).
     scale_slope: [Vec<F>; 3],
+    /// With an added lobe (see [`Added`]): its channel-free part `Q` and `d Q / d ax`,
+    /// `d Q / d ay`.
+    added: Vec<F>,
+    added_ax: Vec<F>,
+    added_ay: Vec<F>,
 }
 
-/// What the batch kernel evaluates: the single-bounce lobe, optionally scaled by Turquin's
-/// compensation `1 + F0 (1 - E(mu_o)) / E(mu_o)` with the white albedo table `turquin`.
+/// What the batch kernel evaluates: the single-bounce lobe and a model's multiple-bounce term
+/// (`added`).
 #[derive(Clone, Copy)]
 pub struct Lobe<'a> {
     pub single: &'a SingleBounce<f64>,
-    pub turquin: Option<&'static AlbedoTable>,
+    pub added: Added,
+}
+
+/// The multiple-bounce term the batch kernel evaluates with the single-bounce lobe, read from
+/// the white albedo table of the surface's distribution and height model.
+#[derive(Clone, Copy)]
+pub enum Added {
+    /// None: the model `single`.
+    None,
+    /// Turquin 2019 eq. 6-7: the single lobe scaled by `1 + F0 (1 - E(mu_o)) / E(mu_o)`.
+    Turquin(&'static AlbedoTable),
+    /// Kulla & Conty 2017: the lobe `(1 - E(mu_i)) (1 - E(mu_o)) F_ms / (pi (1 - E_avg))`
+    /// added to the single lobe ([`kulla_conty_lanes`]).
+    KullaConty(&'static AlbedoTable),
 }
 
 impl<'a> From<&'a SingleBounce<f64>> for Lobe<'a> {
     fn from(single: &'a SingleBounce<f64>) -> Self {
         Lobe {
             single,
-            turquin: None,
+            added: Added::None,
         }
+    }
+}
+
+impl<'a> Lobe<'a> {
+    /// The whole value of `model` at `single`'s parameters, when the batch kernel evaluates
+    /// it: `single`, `turquin` and `kulla-conty`; `None` for the other models (the render
+    /// plan gives their multiple-bounce term to the scalar kernel).
+    pub fn of(model: Model, single: &'a SingleBounce<f64>) -> Option<Lobe<'a>> {
+        let table = || AlbedoTable::get(single.microfacet.ndf, single.height);
+        let added = match model {
+            Model::Single => Added::None,
+            Model::Turquin => Added::Turquin(table()),
+            Model::KullaConty => Added::KullaConty(table()),
+            _ => return None,
+        };
+        Some(Lobe { single, added })
+    }
+
+    /// Whether the batch kernel evaluates the whole value of `model`.
+    pub fn serves(model: Model) -> bool {
+        let any = SingleBounce {
+            microfacet: Microfacet::new(NdfKind::Ggx, 0.5, 0.5),
+            fresnel: Fresnel::White,
+            height: Height::Correlated,
+        };
+        Lobe::of(model, &any).is_some()
     }
 }
 
@@ -523,49 +594,292 @@ fn fill_lanes_any<F: LaneFloat>(
         tangents,
         lanes,
     );
-    let n = range.len();
-    // d alpha / d ax and d alpha / d ay of Turquin's alpha = sqrt(ax ay) (zero without it).
-    let mut dalpha = [F::zero(); 2];
-    if let Some(table) = lobe.turquin {
-        compensate(geometry, single, table, range.clone(), tangents, lanes);
-        let (ax, ay) = (single.microfacet.ax, single.microfacet.ay);
-        let alpha = (ax * ay).sqrt();
-        dalpha = [F::c(alpha / (2.0 * ax)), F::c(alpha / (2.0 * ay))];
+    let (ax, ay) = (single.microfacet.ax, single.microfacet.ay);
+    // d alpha / d ax and d alpha / d ay of the tables' roughness alpha = sqrt(ax ay).
+    let alpha = (ax * ay).sqrt();
+    let dalpha = [F::c(alpha / (2.0 * ax)), F::c(alpha / (2.0 * ay))];
+    let mut colours = None;
+    match lobe.added {
+        Added::None => {}
+        Added::Turquin(table) => {
+            compensate(geometry, single, table, range.clone(), tangents, lanes)
+        }
+        Added::KullaConty(table) => {
+            colours = Some(kulla_conty_lanes(
+                table,
+                single,
+                geometry,
+                range.clone(),
+                tangents,
+                lanes,
+            ))
+        }
     }
-    let lobe_scaled = lobe.turquin.is_some();
-    // Weight by the irradiance: `fresnel` becomes the record's contribution `w F lobe`,
-    // the Fresnel derivatives `w lobe dF`, and `by_ax`, `by_ay` get `w F d lobe`.
+    let scaled = matches!(lobe.added, Added::Turquin(_));
     for c in 0..3 {
         let w = &geometry.weight[c][range.clone()];
-        let lobe = &lanes.lobe[..n];
-        if tangents {
-            lanes.by_ax[c].resize(n, F::zero());
-            lanes.by_ay[c].resize(n, F::zero());
-            let (f, a, b) = (
-                &lanes.fresnel[c][..n],
-                &mut lanes.d_fresnel_a[c][..n],
-                &mut lanes.d_fresnel_b[c][..n],
-            );
-            let (by_ax, by_ay) = (&mut lanes.by_ax[c][..n], &mut lanes.by_ay[c][..n]);
-            let (d_ax, d_ay) = (&lanes.d_ax[..n], &lanes.d_ay[..n]);
-            for l in 0..n {
-                let (wl, wf) = (w[l] * lobe[l], w[l] * f[l]);
-                a[l] = a[l] * wl;
-                b[l] = b[l] * wl;
-                by_ax[l] = wf * d_ax[l];
-                by_ay[l] = wf * d_ay[l];
-            }
-            if lobe_scaled {
-                let slope = &lanes.scale_slope[c][..n];
-                for l in 0..n {
-                    let wl = w[l] * lobe[l] * slope[l];
-                    by_ax[l] = by_ax[l] + wl * dalpha[0];
-                    by_ay[l] = by_ay[l] + wl * dalpha[1];
-                }
+        match colours {
+            None => weigh::<F, false>(
+                w,
+                c,
+                scaled.then_some(dalpha),
+                [F::zero(); 5],
+                tangents,
+                lanes,
+            ),
+            Some(colours) => weigh::<F, true>(w, c, None, colours[c], tangents, lanes),
+        }
+    }
+}
+
+/// Weight channel `c` of every record by its irradiance `w`: the lanes become the record's
+/// contribution to the pixel sums. With the single lobe `L`, its Fresnel `F` and, when
+/// `ADDED`, an added lobe `Q Phi` of channel-free part `Q` ([`Lanes::added`]) and colour
+/// `colour = [Phi, dPhi/dax, dPhi/day, dPhi/da, dPhi/db]`:
+/// `fresnel` becomes `w (F L + Q Phi)`, the Fresnel derivatives `w (L dF + Q dPhi)`, and
+/// `by_ax` gets `w (F dL/dax + Phi dQ/dax + Q dPhi/dax)` (`by_ay` alike). With Turquin's scale
+/// (`scaled`: `d alpha / d ax`, `d alpha / d ay`) `by_ax` also gets
+/// `w L scale_slope dalpha/dax` (see [`compensate`]).
+#[inline(always)]
+fn weigh<F: LaneFloat, const ADDED: bool>(
+    w: &[F],
+    c: usize,
+    scaled: Option<[F; 2]>,
+    colour: [F; 5],
+    tangents: bool,
+    lanes: &mut Lanes<F>,
+) {
+    let n = w.len();
+    let [phi, phi_ax, phi_ay, phi_a, phi_b] = colour;
+    let added_len = if ADDED { n } else { 0 };
+    let q = &lanes.added[..added_len];
+    let lobe = &lanes.lobe[..n];
+    if tangents {
+        lanes.by_ax[c].resize(n, F::zero());
+        lanes.by_ay[c].resize(n, F::zero());
+        let (f, a, b) = (
+            &lanes.fresnel[c][..n],
+            &mut lanes.d_fresnel_a[c][..n],
+            &mut lanes.d_fresnel_b[c][..n],
+        );
+        let (by_ax, by_ay) = (&mut lanes.by_ax[c][..n], &mut lanes.by_ay[c][..n]);
+        let (d_ax, d_ay) = (&lanes.d_ax[..n], &lanes.d_ay[..n]);
+        let (q_ax, q_ay) = (&lanes.added_ax[..added_len], &lanes.added_ay[..added_len]);
+        for l in 0..n {
+            let (wl, wf) = (w[l] * lobe[l], w[l] * f[l]);
+            a[l] *= wl;
+            b[l] *= wl;
+            by_ax[l] = wf * d_ax[l];
+            by_ay[l] = wf * d_ay[l];
+            if ADDED {
+                let wq = w[l] * q[l];
+                a[l] += wq * phi_a;
+                b[l] += wq * phi_b;
+                by_ax[l] += w[l] * (phi * q_ax[l] + q[l] * phi_ax);
+                by_ay[l] += w[l] * (phi * q_ay[l] + q[l] * phi_ay);
             }
         }
-        for (f, (&w, &lobe)) in lanes.fresnel[c][..n].iter_mut().zip(w.iter().zip(lobe)) {
-            *f = *f * (w * lobe);
+        if let Some(dalpha) = scaled {
+            let slope = &lanes.scale_slope[c][..n];
+            for l in 0..n {
+                let wl = w[l] * lobe[l] * slope[l];
+                by_ax[l] += wl * dalpha[0];
+                by_ay[l] += wl * dalpha[1];
+            }
+        }
+    }
+    let f = &mut lanes.fresnel[c][..n];
+    for l in 0..n {
+        f[l] *= w[l] * lobe[l];
+        if ADDED {
+            f[l] += w[l] * q[l] * phi;
+        }
+    }
+}
+
+/// `1 / (k + 1)!` for `k = 0..12`: the Taylor coefficients of `(e^y - 1) / y`.
+const EXPM1_TAYLOR: [f64; 12] = {
+    let mut out = [0.0; 12];
+    let mut factorial = 1.0;
+    let mut k = 0;
+    while k < 12 {
+        factorial *= (k + 1) as f64;
+        out[k] = 1.0 / factorial;
+        k += 1;
+    }
+    out
+};
+
+/// `e^x - 1` for `|x| <= 8`, branch-free in the lanes' type: the Taylor series of `e^y - 1` to
+/// degree 12 at `y = x / 32` (`|y| <= 1/4`: truncation below `1e-16` of the value), then five
+/// doublings `e^(2y) - 1 = m (m + 2)`. Unlike `1 - e^x` by a subtraction, this keeps the
+/// relative accuracy of `1 - E` where the albedo `E` is near 1. The albedo tables hold
+/// `ln E` in `[-3.7, 1e-3]` (checked by a test).
+#[inline(always)]
+fn expm1<F: LaneFloat>(x: F) -> F {
+    let y = x * F::c(1.0 / 32.0);
+    let mut p = F::c(EXPM1_TAYLOR[11]);
+    for k in (0..11).rev() {
+        p = p * y + F::c(EXPM1_TAYLOR[k]);
+    }
+    let mut m = p * y;
+    for _ in 0..5 {
+        m = m * (m + F::c(2.0));
+    }
+    m
+}
+
+/// `single` in dual numbers, no derivative seeded.
+fn lifted(single: &SingleBounce<f64>) -> SingleBounce<Dual64> {
+    let lift = Dual64::from_re;
+    SingleBounce {
+        microfacet: Microfacet::new(
+            single.microfacet.ndf,
+            lift(single.microfacet.ax),
+            lift(single.microfacet.ay),
+        ),
+        fresnel: match single.fresnel {
+            Fresnel::White => Fresnel::White,
+            Fresnel::Schlick { f0 } => Fresnel::Schlick {
+                f0: Rgb(f0.0.map(lift)),
+            },
+            Fresnel::Conductor { eta, k } => Fresnel::Conductor {
+                eta: Rgb(eta.0.map(lift)),
+                k: Rgb(k.0.map(lift)),
+            },
+            Fresnel::Dielectric { eta } => Fresnel::Dielectric { eta: lift(eta) },
+        },
+        height: single.height,
+    }
+}
+
+/// The kernel's parameters (see [`PixelTangents`]), each with a unit derivative in one of the
+/// four copies of `single` in dual numbers: `ax`, `ay`, every channel's first Fresnel parameter,
+/// every channel's second. Channel `c` of a value depends only on channel `c`'s Fresnel
+/// parameters, so one seed serves all three channels.
+pub fn seeded(single: &SingleBounce<f64>) -> [SingleBounce<Dual64>; 4] {
+    let mut out = [lifted(single); 4];
+    out[0].microfacet.ax = out[0].microfacet.ax.derivative();
+    out[1].microfacet.ay = out[1].microfacet.ay.derivative();
+    for (s, second) in [(2, false), (3, true)] {
+        match &mut out[s].fresnel {
+            Fresnel::Schlick { f0 } if !second => *f0 = f0.map(|v| v.derivative()),
+            Fresnel::Conductor { eta, .. } if !second => *eta = eta.map(|v| v.derivative()),
+            Fresnel::Conductor { k, .. } if second => *k = k.map(|v| v.derivative()),
+            _ => {}
+        }
+    }
+    out
+}
+
+/// Kulla & Conty 2017 ("Revisiting Physically Based Shading at Imageworks", the compensation
+/// lobe with Fresnel; [`crate::bsdf::kulla_conty`]): `f_ms = s_c Q` with the channel-free
+/// `Q = (1 - E(mu_i)) (1 - E(mu_o))` per record and `s_c = F_ms / (pi (1 - E_avg))` per channel.
+/// Fills [`Lanes::added`] with `Q` (and its derivatives by `ax`, `ay` when `tangents`) and
+/// returns each channel's colour `[s, ds/dax, ds/day, ds/da, ds/db]` for [`weigh`].
+///
+/// `E` at `alpha = sqrt(ax ay)`: the table's `ln E` row at `alpha` is computed once in
+/// `Dual64` ([`AlbedoTable::ln_e_row`], carrying `d ln E / d alpha`); each record interpolates
+/// it at its precomputed `mu` cells and takes `1 - E = -expm1(ln E)` ([`expm1`]), clamped
+/// at 0 as the scalar model clamps, with `d (1 - E) / d alpha = -E d ln E / d alpha`. The
+/// colours come from the scalar model itself ([`KullaConty::lobe_scale`]) in `f64` and, for
+/// their derivatives, in `Dual64`.
+#[inline(always)]
+fn kulla_conty_lanes<F: LaneFloat>(
+    table: &AlbedoTable,
+    single: &SingleBounce<f64>,
+    geometry: &Geometry<F>,
+    range: std::ops::Range<usize>,
+    tangents: bool,
+    lanes: &mut Lanes<F>,
+) -> [[F; 5]; 3] {
+    let value = KullaConty::new(*single).lobe_scale().0;
+    let slopes = if tangents {
+        seeded(single).map(|s| KullaConty::new(s).lobe_scale().0.map(|v| v.eps))
+    } else {
+        [[0.0; 3]; 4]
+    };
+    let n = range.len();
+    lanes.added.resize(n, F::zero());
+    if tangents {
+        lanes.added_ax.resize(n, F::zero());
+        lanes.added_ay.resize(n, F::zero());
+        kulla_conty_records::<F, true>(geometry, single, table, range, lanes);
+    } else {
+        kulla_conty_records::<F, false>(geometry, single, table, range, lanes);
+    }
+    [0, 1, 2].map(|c| {
+        [
+            value[c],
+            slopes[0][c],
+            slopes[1][c],
+            slopes[2][c],
+            slopes[3][c],
+        ]
+        .map(F::c)
+    })
+}
+
+/// `(1 - E, d (1 - E) / d alpha)` at the `mu` cell `(node, u)` from the `ln E` row and its
+/// slope `rows` (see [`kulla_conty_lanes`]); the slope only when `TANGENTS`.
+#[inline(always)]
+fn lost_energy<F: LaneFloat, const TANGENTS: bool>(
+    (ln_e, d_ln_e): (&[F; 64], &[F; 64]),
+    node: u32,
+    u: F,
+) -> (F, F) {
+    let (zero, one) = (F::zero(), F::one());
+    let (lo, hi) = (node as usize & 63, (node as usize + 1) & 63);
+    let lost = zero - expm1(ln_e[lo] * (one - u) + ln_e[hi] * u);
+    let slope = if TANGENTS {
+        (lost - one) * (d_ln_e[lo] * (one - u) + d_ln_e[hi] * u)
+    } else {
+        zero
+    };
+    if lost > zero {
+        (lost, slope)
+    } else {
+        (zero, zero)
+    }
+}
+
+/// The per-record loop of [`kulla_conty_lanes`]: `Q` and, when `TANGENTS`, `dQ/dax`, `dQ/day`.
+#[inline(always)]
+fn kulla_conty_records<F: LaneFloat, const TANGENTS: bool>(
+    geometry: &Geometry<F>,
+    single: &SingleBounce<f64>,
+    table: &AlbedoTable,
+    range: std::ops::Range<usize>,
+    lanes: &mut Lanes<F>,
+) {
+    let (ax, ay) = (single.microfacet.ax, single.microfacet.ay);
+    let alpha = Dual64::from_re((ax * ay).sqrt()).derivative();
+    let row = table.ln_e_row(alpha);
+    // The row padded to 64 nodes, so that an index masked by 63 needs no bounds check.
+    let (mut ln_e, mut d_ln_e) = ([F::zero(); 64], [F::zero(); 64]);
+    for (j, v) in row.iter().enumerate().take(MU_COUNT) {
+        ln_e[j] = F::c(v.re);
+        d_ln_e[j] = F::c(v.eps);
+    }
+    let dalpha = [alpha.re / (2.0 * ax), alpha.re / (2.0 * ay)].map(F::c);
+    let n = range.len();
+    let nodes = [0, 1].map(|side| &geometry.mu_node[side][range.clone()]);
+    let weights = [0, 1].map(|side| &geometry.mu_weight[side][range.clone()]);
+    let q = &mut lanes.added[..n];
+    let tangent_len = if TANGENTS { n } else { 0 };
+    let (q_ax, q_ay) = (
+        &mut lanes.added_ax[..tangent_len],
+        &mut lanes.added_ay[..tangent_len],
+    );
+    let rows = (&ln_e, &d_ln_e);
+    for l in 0..n {
+        let (li, dli) = lost_energy::<F, TANGENTS>(rows, nodes[0][l], weights[0][l]);
+        let (lo, dlo) = lost_energy::<F, TANGENTS>(rows, nodes[1][l], weights[1][l]);
+        q[l] = li * lo;
+        if TANGENTS {
+            let d = dli * lo + li * dlo;
+            q_ax[l] = d * dalpha[0];
+            q_ay[l] = d * dalpha[1];
         }
     }
 }

@@ -4,7 +4,7 @@
 //!
 //! | axis | values |
 //! | --- | --- |
-//! | model | `single`, and `turquin` (the single lobe scaled by Turquin's compensation): the models a fit renders through the kernel |
+//! | model | `single`, `turquin` (the single lobe scaled by Turquin's compensation) and `kulla-conty` (plus its compensation lobe): the models a fit renders through the kernel ([`Lobe::of`]) |
 //! | surface | the sweep's surfaces of the model: GGX and Beckmann, both height models, every roughness (isotropic and anisotropic) and every Fresnel |
 //! | directions | the sweep's pairs, plus its below-horizon pairs mirrored to `z = +1e-7`: the kernel drops every pair with a direction at or below the horizon, so these are its grazing-most records |
 //!
@@ -17,7 +17,6 @@
 //! parameters and the diffuse albedo) need only be finite: a tangent may be negative.
 
 use super::{direction_pairs, relative_deviation, Query, SweepSize, Tally};
-use crate::bsdf::albedo_table::AlbedoTable;
 use crate::bsdf::Model;
 use crate::render::batch::{BatchRecords, Lobe, Precision};
 use crate::render::render_pixels;
@@ -67,16 +66,12 @@ impl BatchReport {
 
 /// Whether a fit renders `model` through the batch kernel.
 pub fn serves(model: Model) -> bool {
-    matches!(model, Model::Single | Model::Turquin)
+    Lobe::serves(model)
 }
 
 /// What the batch kernel evaluates for `model` (one it [`serves`]) at `single`'s parameters.
 fn lobe(model: Model, single: &crate::bsdf::single::SingleBounce<f64>) -> Lobe<'_> {
-    Lobe {
-        single,
-        turquin: (model == Model::Turquin)
-            .then(|| AlbedoTable::get(single.microfacet.ndf, single.height)),
-    }
+    Lobe::of(model, single).expect("a model the batch kernel serves")
 }
 
 /// The sweep's direction pairs plus its below-horizon ones mirrored just above it.

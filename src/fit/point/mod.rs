@@ -94,8 +94,9 @@ pub struct FitOptions {
     pub pyramid: usize,
     /// Work the renders may skip (`--no-skip` switches skips off; see `render::plan`).
     pub skips: Skips,
-    /// Arithmetic of the batch kernel's lanes (`--batch-precision`; default `f32`).
-    pub precision: Precision,
+    /// Arithmetic of the batch kernel's lanes (`--batch-precision`); `None`: the model's
+    /// default ([`Precision::default_for`]).
+    pub precision: Option<Precision>,
 }
 
 /// The loss of one photo at the fitted parameters.
@@ -251,13 +252,21 @@ fn fit_level(
     let objective = Objective::new(space, records, options.loss, options.seed)
         .with_gradient(options.gradient)
         .with_skips(options.skips)
-        .with_precision(options.precision);
+        .with_precision(
+            options
+                .precision
+                .unwrap_or(Precision::default_for(space.model)),
+        );
     // Stochastic models: the global start is searched on one render, the local searches use
     // the unbiased pair loss (see `Objective::single_render` and `crate::loss`).
     let screening = Objective::new(space, records, options.loss, options.seed)
         .with_gradient(options.gradient)
         .with_skips(options.skips)
-        .with_precision(options.precision)
+        .with_precision(
+            options
+                .precision
+                .unwrap_or(Precision::default_for(space.model)),
+        )
         .single_render();
     if objective.pixel_count() == 0 {
         return Err(Error::argument(
@@ -314,7 +323,11 @@ fn fit_level(
         // noise; rank the results on fresh streams, which that noise does not follow.
         let judge = Objective::new(space, records, options.loss, options.seed.wrapping_add(1))
             .with_skips(options.skips)
-            .with_precision(options.precision);
+            .with_precision(
+                options
+                    .precision
+                    .unwrap_or(Precision::default_for(space.model)),
+            );
         for result in &mut results {
             result.0 = judge.loss(&result.1) / judge.loss_from_cost(1.0);
         }

@@ -16,9 +16,7 @@
 //! variance and pull the fit towards less multiple scattering.
 
 use super::params::ParamSpace;
-use crate::bsdf::albedo_table::AlbedoTable;
 use crate::bsdf::single::SingleBounce;
-use crate::bsdf::Model;
 use crate::bsdf::ScalarBrdf;
 use crate::bsdf::{differentiable, BounceCap};
 use crate::fit::point::params::Surface;
@@ -139,7 +137,7 @@ impl<'a> Objective<'a> {
             skips: Skips::default(),
             plan: OnceLock::new(),
             batch: OnceLock::new(),
-            precision: Precision::default(),
+            precision: Precision::default_for(space.model),
             stochastic,
             scale,
             evaluations: Arc::new(AtomicUsize::new(0)),
@@ -198,7 +196,12 @@ impl<'a> Objective<'a> {
         self.plan.get_or_init(|| {
             let space = &self.space;
             let model = (space.model, space.ndf, space.height, self.stochastic);
-            RenderPlan::new(self.skips, model, self.records, &self.pixels)
+            // Where the batch kernel evaluates the model's multiple-bounce term, it does so at
+            // every sub-sample in less time than the anchors' scalar evaluations and their
+            // interpolation take (docs/speed.md), and exactly: no anchors.
+            let mut skips = self.skips;
+            skips.sparse_multi &= !Lobe::serves(space.model);
+            RenderPlan::new(skips, model, self.records, &self.pixels)
         })
     }
 
@@ -216,19 +219,17 @@ impl<'a> Objective<'a> {
         })
     }
 
-    /// What the batch kernel renders when a render at `single`'s parameters is the single
-    /// lobe (the model is `single`, or the plan drops the multiple-bounce term there) or
-    /// Turquin's scaled single lobe, plus diffuse; `None` for the other models (their exact
-    /// single term still comes from the batch kernel through [`Objective::batch_shared`]).
-    /// Every seed's render is then the same.
+    /// What the batch kernel renders when it evaluates the whole render at `single`'s
+    /// parameters: the single lobe where the plan drops the multiple-bounce term, the model's
+    /// whole lobe where the kernel has it ([`Lobe::of`]: `single`, `turquin`, `kulla-conty`)
+    /// and the plan asks for it exactly; `None` otherwise (the exact single term still comes
+    /// from the batch kernel through [`Objective::batch_shared`]). Every seed's render is
+    /// then the same.
     fn batch_lobe<'s>(&self, single: &'s SingleBounce<f64>) -> Option<Lobe<'s>> {
-        match (self.space.model, self.plan().multi_term(single)) {
-            (Model::Single, _) | (_, MultiTerm::Skipped) => Some(single.into()),
-            (Model::Turquin, MultiTerm::Exact) => Some(Lobe {
-                single,
-                turquin: Some(AlbedoTable::get(single.microfacet.ndf, single.height)),
-            }),
-            _ => None,
+        match self.plan().multi_term(single) {
+            MultiTerm::Skipped => Some(single.into()),
+            MultiTerm::Exact => Lobe::of(self.space.model, single),
+            MultiTerm::Sparse(_) => None,
         }
     }
 

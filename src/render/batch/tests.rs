@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::bsdf::testing::random_upper;
-use crate::bsdf::turquin::Turquin;
+use crate::bsdf::{differentiable, BounceCap};
 use crate::microfacet::Microfacet;
 use crate::render::render_model;
 use crate::scalar::{Real, Rgb};
@@ -131,28 +131,39 @@ fn floor(precision: Precision) -> f64 {
 const PRECISIONS: [(Precision, f64, f64); 2] =
     [(Precision::F64, 1e-12, 1e-9), (Precision::F32, 2e-6, 5e-4)];
 
-/// The batch lobe of `single`, with Turquin's compensation when `turquin`.
-fn lobe(single: &SingleBounce<f64>, turquin: bool) -> Lobe<'_> {
-    Lobe {
-        single,
-        turquin: turquin.then(|| AlbedoTable::get(single.microfacet.ndf, single.height)),
-    }
+/// The models whose whole value the batch kernel evaluates, other than `single`.
+const ADDED: [Model; 2] = [Model::Turquin, Model::KullaConty];
+
+/// The scalar kernel's render of `model` on `single` (at any scalar type).
+fn scalar_render<T: Real>(
+    model: Model,
+    single: SingleBounce<T>,
+    diffuse: [T; 3],
+    records: &ShadingRecords,
+    pixels: &[usize],
+) -> Vec<[T; 3]> {
+    let brdf = differentiable(model, single, BounceCap::NONE).expect("an analytic model");
+    render_model(brdf.as_ref(), diffuse, records, pixels, 0)
 }
 
 #[test]
 fn turquin_batch_render_equals_its_scalar_render() {
-    check_renders(true, 2000, 9);
+    check_renders(Model::Turquin, 2000, 9);
+}
+
+#[test]
+fn kulla_conty_batch_render_equals_its_scalar_render() {
+    check_renders(Model::KullaConty, 2000, 5);
 }
 
 #[test]
 fn batch_render_equals_the_scalar_render() {
-    check_renders(false, 3000, 7);
+    check_renders(Model::Single, 3000, 7);
 }
 
-/// Batch renders of every surface (Turquin-scaled when `turquin`) over `pixels` random pixels
-/// against the scalar kernel's, in both lane precisions: finite, non-negative and within the
-/// precision's bound.
-fn check_renders(turquin: bool, pixels: usize, seed: u64) {
+/// Batch renders of `model` on every surface over `pixels` random pixels against the scalar
+/// kernel's, in both lane precisions: finite, non-negative and within the precision's bound.
+fn check_renders(model: Model, pixels: usize, seed: u64) {
     let records = random_records(pixels, seed);
     let pixels: Vec<usize> = (0..records.pixel_count()).collect();
     let diffuse = [0.1, 0.2, 0.3];
@@ -160,141 +171,76 @@ fn check_renders(turquin: bool, pixels: usize, seed: u64) {
         let batch = BatchRecords::with_precision(&records, &pixels, precision);
         let mut worst_of_all: f64 = 0.0;
         for single in surfaces() {
-            let reference = if turquin {
-                render_model(&Turquin::new(single), diffuse, &records, &pixels, 0)
-            } else {
-                render_model(&single, diffuse, &records, &pixels, 0)
-            };
-            let fast = batch.render(lobe(&single, turquin), diffuse);
+            let reference = scalar_render(model, single, diffuse, &records, &pixels);
+            let lobe = Lobe::of(model, &single).expect("served");
+            let fast = batch.render(lobe, diffuse);
             assert!(fast.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
             let worst = worst_relative_above(&reference, &fast, floor(precision));
             worst_of_all = worst_of_all.max(worst);
             assert!(
                 worst < tolerance,
-                "{precision:?} {single:?}: worst relative difference {worst:e}"
+                "{model} {precision:?} {single:?}: worst relative difference {worst:e}"
             );
         }
-        eprintln!("{precision:?}: worst {worst_of_all:e}");
+        eprintln!("{model} {precision:?}: worst {worst_of_all:e}");
     }
 }
 
-/// The scalar kernel in dual numbers with the derivative seeded on one parameter.
+/// The derivatives of the scalar kernel's render of `model` by one of the kernel's parameters:
+/// `single` in dual numbers seeded as [`seeded`] seeds it.
 fn dual_render(
-    single: &SingleBounce<f64>,
-    turquin: bool,
+    model: Model,
+    single: SingleBounce<Dual64>,
     records: &ShadingRecords,
     pixels: &[usize],
-    seed: impl Fn(&mut SingleBounce<Dual64>),
 ) -> Vec<[f64; 3]> {
-    let lift = |v: f64| Dual64::from_re(v);
-    let mut dual = SingleBounce {
-        microfacet: Microfacet::new(
-            single.microfacet.ndf,
-            lift(single.microfacet.ax),
-            lift(single.microfacet.ay),
-        ),
-        fresnel: match single.fresnel {
-            Fresnel::White => Fresnel::White,
-            Fresnel::Schlick { f0 } => Fresnel::Schlick {
-                f0: Rgb(f0.0.map(lift)),
-            },
-            Fresnel::Conductor { eta, k } => Fresnel::Conductor {
-                eta: Rgb(eta.0.map(lift)),
-                k: Rgb(k.0.map(lift)),
-            },
-            Fresnel::Dielectric { eta } => Fresnel::Dielectric { eta: lift(eta) },
-        },
-        height: single.height,
-    };
-    seed(&mut dual);
-    let zero = [Dual64::c(0.0); 3];
-    let render = if turquin {
-        render_model(&Turquin::new(dual), zero, records, pixels, 0)
-    } else {
-        render_model(&dual, zero, records, pixels, 0)
-    };
+    let render = scalar_render(model, single, [Dual64::c(0.0); 3], records, pixels);
     render.iter().map(|p| p.map(|v| v.eps)).collect()
 }
 
 #[test]
 fn tangents_equal_the_dual_number_derivatives_of_the_scalar_kernel() {
-    check_tangents(false);
+    check_tangents(Model::Single);
 }
 
 #[test]
-fn turquin_tangents_equal_the_dual_number_derivatives_of_its_scalar_kernel() {
-    check_tangents(true);
-}
-
-fn check_tangents(turquin: bool) {
-    for (precision, _, tolerance) in PRECISIONS {
-        check_tangents_in(precision, tolerance, turquin);
+fn added_lobe_tangents_equal_the_dual_number_derivatives_of_the_scalar_kernel() {
+    for model in ADDED {
+        check_tangents(model);
     }
 }
 
-fn check_tangents_in(precision: Precision, tolerance: f64, turquin: bool) {
+fn check_tangents(model: Model) {
+    for (precision, _, tolerance) in PRECISIONS {
+        check_tangents_in(precision, tolerance, model);
+    }
+}
+
+fn check_tangents_in(precision: Precision, tolerance: f64, model: Model) {
     let records = random_records(1500, 11);
     let pixels: Vec<usize> = (0..records.pixel_count()).collect();
     let batch = BatchRecords::with_precision(&records, &pixels, precision);
     let worst_of_all = std::cell::Cell::new(0.0_f64);
     for single in surfaces() {
-        let (_, t) = batch.render_with_tangents(lobe(&single, turquin), [0.0; 3]);
+        let lobe = Lobe::of(model, &single).expect("served");
+        let (_, t) = batch.render_with_tangents(lobe, [0.0; 3]);
         let check = |name: &str, fast: &[[f64; 3]], exact: Vec<[f64; 3]>| {
             let worst = worst_relative_above(&exact, fast, floor(precision));
             worst_of_all.set(worst_of_all.get().max(worst));
-            if worst > 2e-5 {
-                eprintln!("DEBUG {precision:?} {single:?} {name} {worst:e}");
-            }
             assert!(
                 worst < tolerance,
-                "{precision:?} {single:?} d/d{name}: worst {worst:e}"
+                "{model} {precision:?} {single:?} d/d{name}: worst {worst:e}"
             );
         };
-        check(
-            "ax",
-            &t.ax,
-            dual_render(&single, turquin, &records, &pixels, |s| {
-                s.microfacet.ax = s.microfacet.ax.derivative()
-            }),
-        );
-        check(
-            "ay",
-            &t.ay,
-            dual_render(&single, turquin, &records, &pixels, |s| {
-                s.microfacet.ay = s.microfacet.ay.derivative()
-            }),
-        );
-        // Channel c of a pixel depends only on channel c's Fresnel parameters, so seeding all
-        // three channels at once gives each channel its own derivative.
+        let [by_ax, by_ay, by_a, by_b] =
+            seeded(&single).map(|s| dual_render(model, s, &records, &pixels));
+        check("ax", &t.ax, by_ax);
+        check("ay", &t.ay, by_ay);
         match single.fresnel {
-            Fresnel::Schlick { .. } => check(
-                "F0",
-                &t.fresnel_a,
-                dual_render(&single, turquin, &records, &pixels, |s| {
-                    if let Fresnel::Schlick { f0 } = &mut s.fresnel {
-                        *f0 = f0.map(|v| v.derivative());
-                    }
-                }),
-            ),
+            Fresnel::Schlick { .. } => check("F0", &t.fresnel_a, by_a),
             Fresnel::Conductor { .. } => {
-                check(
-                    "eta",
-                    &t.fresnel_a,
-                    dual_render(&single, turquin, &records, &pixels, |s| {
-                        if let Fresnel::Conductor { eta, .. } = &mut s.fresnel {
-                            *eta = eta.map(|v| v.derivative());
-                        }
-                    }),
-                );
-                check(
-                    "k",
-                    &t.fresnel_b,
-                    dual_render(&single, turquin, &records, &pixels, |s| {
-                        if let Fresnel::Conductor { k, .. } = &mut s.fresnel {
-                            *k = k.map(|v| v.derivative());
-                        }
-                    }),
-                );
+                check("eta", &t.fresnel_a, by_a);
+                check("k", &t.fresnel_b, by_b);
             }
             Fresnel::White | Fresnel::Dielectric { .. } => {
                 assert!(t
@@ -332,7 +278,10 @@ fn check_tangents_in(precision: Precision, tolerance: f64, turquin: bool) {
             .collect();
         assert!(worst_relative(&lambert, &t.diffuse) < 1e-9);
     }
-    eprintln!("{precision:?}: worst tangent {:e}", worst_of_all.get());
+    eprintln!(
+        "{model} {precision:?}: worst tangent {:e}",
+        worst_of_all.get()
+    );
 }
 
 #[test]
@@ -342,16 +291,51 @@ fn batch_render_is_the_same_for_any_thread_count() {
     let batch = BatchRecords::new(&records, &pixels);
     assert_eq!(batch.precision(), Precision::F32);
     let single = surfaces()[17];
-    let in_pool = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| batch.render_with_tangents(&single, [0.1; 3]))
-    };
-    let (one, t1) = in_pool(1);
-    let (two, t2) = in_pool(2);
-    assert_eq!(one, two);
-    assert_eq!(t1.ax, t2.ax);
-    assert_eq!(t1.fresnel_a, t2.fresnel_a);
+    for model in [Model::Single, Model::KullaConty] {
+        let lobe = Lobe::of(model, &single).expect("served");
+        let in_pool = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| batch.render_with_tangents(lobe, [0.1; 3]))
+        };
+        let (one, t1) = in_pool(1);
+        let (two, t2) = in_pool(2);
+        assert_eq!(one, two);
+        for (a, b) in [
+            (&t1.ax, &t2.ax),
+            (&t1.ay, &t2.ay),
+            (&t1.fresnel_a, &t2.fresnel_a),
+            (&t1.fresnel_b, &t2.fresnel_b),
+        ] {
+            assert_eq!(a, b);
+        }
+    }
+}
+
+/// The kernel's `expm1` covers the albedo tables: every `ln E` lies where its series and
+/// doublings are accurate (`|x| <= 8`), and there it agrees with `f64::exp_m1` to 1e-14
+/// relative (a wrong coefficient or doubling count errs by order one).
+#[test]
+fn expm1_covers_the_albedo_tables() {
+    for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
+        for height in [Height::Correlated, Height::Uncorrelated] {
+            let table = AlbedoTable::get(ndf, height);
+            for alpha in [1e-4f64, 0.01, 0.3, 1.0, 3.0] {
+                for v in table.ln_e_row(alpha) {
+                    assert!(v.abs() <= 8.0, "{ndf:?} {height:?} alpha {alpha}: ln E {v}");
+                }
+            }
+        }
+    }
+    let mut x = -8.0;
+    while x <= 8.0 {
+        let exact = f64::exp_m1(x);
+        let relative = (expm1(x) / exact - 1.0).abs();
+        assert!(relative < 1e-14 || x == 0.0, "expm1({x}): {relative:e}");
+        x += 0.0137;
+    }
+    // Near 0, where `e^x - 1` by a subtraction would keep no digits.
+    assert!((expm1(1e-9f64) / f64::exp_m1(1e-9) - 1.0).abs() < 1e-15);
 }
