@@ -208,24 +208,21 @@ pub fn search(
             // memory from the best point while a restart still lowers the cost.
             let (mut iterations, mut termination) = (0, String::new());
             for round in 0..LBFGS_ROUNDS {
-                let (before, start) = {
-                    let best = objective.best.lock().expect("no panics");
-                    let start = if round == 0 {
-                        x0.clone()
-                    } else {
-                        best.1.clone()
-                    };
-                    (best.0, start)
+                let start = if round == 0 {
+                    x0.clone()
+                } else {
+                    objective.best.lock().expect("no panics").1.clone()
                 };
                 // Tolerances: argmin's strict ones for the analytic models; relative to the
                 // round's starting cost on a stochastic objective (see the constants).
-                let problem = WithGradient::new(objective);
                 let stochastic = objective.is_stochastic();
+                let problem = WithGradient::new(objective);
+                let before = problem.cost(&start)?;
                 let mut line_search = MoreThuenteLineSearch::new();
                 let mut cost_tolerance = 1e-13;
                 if stochastic {
                     line_search = line_search.with_width_tolerance(STOCHASTIC_LINE_SEARCH_WIDTH)?;
-                    cost_tolerance = STOCHASTIC_COST_TOLERANCE * problem.cost(&start)?.abs();
+                    cost_tolerance = STOCHASTIC_COST_TOLERANCE * before.abs();
                 }
                 let solver = LBFGS::new(line_search, 8)
                     .with_tolerance_grad(1e-9)?
@@ -248,9 +245,9 @@ pub fn search(
                 } else {
                     1e-10
                 };
-                if (round > 0 && before - after <= restart_gain * before.abs())
-                    || iterations >= max_iters
-                {
+                // A round that lowered nothing ends the search: the next would start from the
+                // same point with the same empty memory and repeat it.
+                if before - after <= restart_gain * before.abs() || iterations >= max_iters {
                     break;
                 }
             }
