@@ -316,8 +316,13 @@ pub fn mean_photo_error(records: &ShadingRecords, held_out: usize) -> Option<f64
 fn summarise(fit: &MapsFit, holdout: Option<&HeldOutPhoto>) {
     for trial in &fit.basis_trials {
         eprintln!(
-            "{} bases: validation photo relative error {:.4}",
-            trial.bases, trial.validation_error
+            "{} bases: validation photo relative error {:.4} (roughness floor {}; {:.4} without)",
+            trial.bases,
+            trial.validation_error,
+            trial
+                .roughness_floor
+                .map_or("none".into(), |f| format!("{f}")),
+            trial.unfloored_validation_error
         );
     }
     let bases: Vec<String> = fit
