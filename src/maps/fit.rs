@@ -130,6 +130,7 @@ pub struct MapsFitOptions {
 #[derive(Clone, Debug, Serialize)]
 pub struct Basis {
     pub kind: Kind,
+    /// Roughness of the basis (no lower than the fit's roughness floor).
     pub alpha: f64,
     /// Schlick F0 (absent with a known Fresnel).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -724,6 +725,9 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
     tick("texels alone");
     let mut fits = basis_fits(&model, &blocks, &first, bases);
     fits.texels = with_roughness_floor(&fits.texels, roughness_floor);
+    for basis in &mut fits.bases {
+        basis.alpha = basis.alpha.max(roughness_floor.unwrap_or(0.0));
+    }
     fill_unseen(&mut fits.texels, &blocks);
     tick(&format!("{bases} bases"));
     progress.finish();
