@@ -697,9 +697,12 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
                 let predicted = maps_prediction(&model, &texels, options.grid, &validation);
                 relative_error(&predicted, records, &validation)
             };
-            let (roughness_floor, error) = ROUGHNESS_FLOORS
+            let errors: Vec<(Option<f64>, f64)> = ROUGHNESS_FLOORS
                 .iter()
                 .map(|&floor| (floor, error_at(floor)))
+                .collect();
+            let (roughness_floor, error) = *errors
+                .iter()
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .expect("floors to try");
             tick(&format!("{k} bases: validation error {error:.4}"));
@@ -707,7 +710,8 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
                 bases: k,
                 roughness_floor,
                 validation_error: error,
-                unfloored_validation_error: error_at(None),
+                // `ROUGHNESS_FLOORS[0]` is no floor.
+                unfloored_validation_error: errors[0].1,
             });
         }
         let best = basis_trials
