@@ -13,6 +13,7 @@ use bouncefit::bench::jobs::fit_records;
 use bouncefit::bsdf::Model;
 use bouncefit::fit::point::objective::Objective;
 use bouncefit::fit::point::params::{FresnelFamily, ParamSpace};
+use bouncefit::fit::point::StochasticFit;
 use bouncefit::fit::{fit_model, FitOptions, Optimizer};
 use bouncefit::loss::LossKind;
 use bouncefit::render::batch::Precision;
@@ -104,6 +105,8 @@ fn f32_lanes_move_fits_by_less_than_a_thousandth_in_alpha() {
                     pyramid: 1,
                     skips: Default::default(),
                     precision: Some(precision),
+                    // The model's own objective: what the lanes' precision changes.
+                    stochastic_fit: StochasticFit::Direct,
                 };
                 fit_model(&records, &options).unwrap()
             };

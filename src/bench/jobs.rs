@@ -368,6 +368,7 @@ mod tests {
             pyramid: 1,
             skips: Default::default(),
             precision: None,
+            stochastic_fit: Default::default(),
         };
         let row = fit_job(&records, Some(&truth), &options).unwrap();
         let alpha = row.alpha.unwrap();

@@ -16,6 +16,7 @@ use crate::fit::bayes::selection::{GaussianFit, Selection};
 use crate::fit::point::objective::GradientMethod;
 use crate::fit::point::params::{FresnelFamily, ParamSpace};
 use crate::fit::point::uniformity::{self, Uniformity};
+use crate::fit::point::StochasticFit;
 use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
 use crate::material::FresnelSpec;
@@ -105,6 +106,11 @@ pub struct FitOptionArgs {
     /// default of kulla-conty, whose fits converge in fewer evaluations with it).
     #[arg(long, value_enum)]
     pub batch_precision: Option<Precision>,
+    /// How heitz, bitterli and cui are fitted (see docs/reference.md): corrected (defect
+    /// correction on tabulated, then the model's own walks; unbiased at any walk count) or
+    /// direct (L-BFGS or Nelder-Mead on the model's own pair loss).
+    #[arg(long, value_enum, default_value_t = StochasticFit::Corrected)]
+    pub stochastic_fit: StochasticFit,
     #[command(flatten)]
     pub real: RealCaptureArgs,
 }
@@ -289,6 +295,7 @@ impl FitOptionArgs {
             pyramid: self.pyramid,
             skips: Skips::except(&self.no_skip),
             precision: self.batch_precision,
+            stochastic_fit: self.stochastic_fit,
         }
     }
 

@@ -16,6 +16,7 @@
 //!
 //! Nothing here calls into `crate::fit::bayes` (see the table in `crate::fit`).
 
+pub mod corrected;
 pub mod exposure;
 pub mod local;
 pub mod objective;
@@ -34,6 +35,7 @@ use crate::render::batch::Precision;
 use crate::render::plan::{PlanSummary, Skips};
 use crate::shading::ShadingRecords;
 use argmin::core::Error as ArgminError;
+pub use corrected::StochasticFit;
 use exposure::{exposed_records, ExposureEstimate};
 pub use local::TracePoint;
 use local::{LocalOptimizer, Recorder};
@@ -97,6 +99,8 @@ pub struct FitOptions {
     /// Arithmetic of the batch kernel's lanes (`--batch-precision`); `None`: the model's
     /// default ([`Precision::default_for`]).
     pub precision: Option<Precision>,
+    /// How `heitz`, `bitterli` and `cui` are fitted (`--stochastic-fit`, [`corrected`]).
+    pub stochastic_fit: StochasticFit,
 }
 
 /// The loss of one photo at the fitted parameters.
@@ -160,6 +164,9 @@ pub struct ModelFit {
     /// The fitted exposure (`--fit-exposure`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exposure: Option<ExposureEstimate>,
+    /// The defect correction rounds of a stochastic model's fit ([`corrected`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correction: Option<corrected::Correction>,
 }
 
 impl ModelFit {
@@ -191,8 +198,18 @@ pub struct PointFit {
 }
 
 /// Fit one model (the one in `options.space`) to the records: the point estimate, with the
-/// exposure value but no interval (`crate::fit::fit_model` adds it).
+/// exposure value but no interval (`crate::fit::fit_model` adds it). `heitz`, `bitterli` and
+/// `cui` are fitted by defect correction on `tabulated` ([`corrected`]) unless asked otherwise.
 pub fn fit_point(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
+    if corrected::applies(options) {
+        corrected::fit(records, options)
+    } else {
+        fit_point_direct(records, options)
+    }
+}
+
+/// [`fit_point`] on the model's own objective: pyramid levels, then the full resolution.
+fn fit_point_direct(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
     let started = Instant::now();
     let mut coarse: Vec<ShadingRecords> = Vec::new();
     while coarse.len() + 1 < options.pyramid.max(1) {
@@ -249,25 +266,10 @@ fn fit_level(
     progress: bool,
 ) -> Result<ModelFit> {
     let space = options.space;
-    let objective = Objective::new(space, records, options.loss, options.seed)
-        .with_gradient(options.gradient)
-        .with_skips(options.skips)
-        .with_precision(
-            options
-                .precision
-                .unwrap_or(Precision::default_for(space.model)),
-        );
+    let objective = objective_of(records, options);
     // Stochastic models: the global start is searched on one render, the local searches use
     // the unbiased pair loss (see `Objective::single_render` and `crate::loss`).
-    let screening = Objective::new(space, records, options.loss, options.seed)
-        .with_gradient(options.gradient)
-        .with_skips(options.skips)
-        .with_precision(
-            options
-                .precision
-                .unwrap_or(Precision::default_for(space.model)),
-        )
-        .single_render();
+    let screening = objective_of(records, options).single_render();
     if objective.pixel_count() == 0 {
         return Err(Error::argument(
             "photos",
@@ -335,15 +337,7 @@ fn fit_level(
     results.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (_, best_x, _, termination) = results[0].clone();
     let material = space.material(&best_x);
-    let photos = objective
-        .loss_per_photo(&best_x)
-        .into_iter()
-        .map(|(i, loss, pixels)| PhotoLoss {
-            image: records.photos[i].stem.clone(),
-            loss,
-            pixels,
-        })
-        .collect();
+    let photos = photo_losses(&objective, records, &best_x);
     let loss = objective.loss(&best_x);
     let evaluations = [&objective, &screening]
         .iter()
@@ -387,7 +381,33 @@ fn fit_level(
             value: space.exposure(&best_x),
             interval: None,
         }),
+        correction: None,
     })
+}
+
+/// The objective `options` minimise over `records`.
+fn objective_of<'a>(records: &'a ShadingRecords, options: &FitOptions) -> Objective<'a> {
+    Objective::new(options.space, records, options.loss, options.seed)
+        .with_gradient(options.gradient)
+        .with_skips(options.skips)
+        .with_precision(
+            options
+                .precision
+                .unwrap_or(Precision::default_for(options.space.model)),
+        )
+}
+
+/// Each photo's loss at `x`.
+fn photo_losses(objective: &Objective, records: &ShadingRecords, x: &[f64]) -> Vec<PhotoLoss> {
+    objective
+        .loss_per_photo(x)
+        .into_iter()
+        .map(|(i, loss, pixels)| PhotoLoss {
+            image: records.photos[i].stem.clone(),
+            loss,
+            pixels,
+        })
+        .collect()
 }
 
 /// Edge tint of each channel of a conductor fit, for reports (`None` for other Fresnel kinds).
