@@ -16,7 +16,7 @@
 //!
 //! 1. Fit `tabulated` to the photos: `theta_0`.
 //! 2. At `theta_k`, estimate the defect `d_k = S(theta_k) - T(theta_k)` at every loss pixel: the
-//!    stochastic model's render with [`WALKS_PER_PIXEL`] walks per pixel minus `tabulated`'s.
+//!    stochastic model's render minus `tabulated`'s, with [`walks_per_pixel`] walks per pixel.
 //! 3. Fit `tabulated` to the photos minus `d_k`, from `theta_k`: `theta_{k+1}`.
 //! 4. Repeat 2-3 until no coordinate moves by more than [`SETTLED`], at most [`MAX_ROUNDS`].
 //!
@@ -24,9 +24,9 @@
 //! own estimate, so its Fresnel, anisotropy and walk statistics are the model's, not the table's.
 //! The defect's walks use the same streams every round (common random numbers), so the iteration
 //! is a deterministic map and settles instead of chasing fresh noise. Their noise enters as a
-//! fixed offset to the photos, which moves the fit to first order only, symmetrically (1/8 of a
-//! one-walk render's at 64 walks per pixel); the optimiser never sees a random objective. The
-//! derivatives are `tabulated`'s, so where the two models' slopes differ the fixed point is the
+//! fixed offset to the photos, which moves the fit to first order only, symmetrically; the
+//! optimiser never sees a random objective. The derivatives are `tabulated`'s, so where the
+//! two models' slopes differ the fixed point is the
 //! minimiser of the corrected objective, which equals the stochastic model's when the model fits
 //! the photos (the residual is noise).
 //!
@@ -45,9 +45,20 @@ use crate::render::{render_material, render_material_streams};
 use crate::shading::ShadingRecords;
 use serde::{Deserialize, Serialize};
 
-/// Walks of the stochastic model per pixel in each defect estimate (spread over the
-/// sub-samples).
-pub const WALKS_PER_PIXEL: usize = 64;
+/// Walks of the stochastic model in each defect estimate, over all loss pixels: the defect's
+/// noise moves the fit in proportion to `1 / sqrt(walks)` (a fixed offset of the photos,
+/// averaged by the fit over every pixel), so a budget in total walks holds the fit's precision
+/// at any image size.
+pub const WALK_BUDGET: usize = 1 << 21;
+
+/// Walks per pixel at least and at most (the most: 64, as measured in docs/fidelity.md on
+/// nine 32x32 photos, 9216 pixels, where the budget allows 227).
+pub const WALKS_PER_PIXEL: (usize, usize) = (4, 64);
+
+/// Walks per pixel of a defect estimate over `pixels` loss pixels.
+pub fn walks_per_pixel(pixels: usize) -> usize {
+    (WALK_BUDGET / pixels.max(1)).clamp(WALKS_PER_PIXEL.0, WALKS_PER_PIXEL.1)
+}
 
 /// Rounds of correction at most.
 pub const MAX_ROUNDS: usize = 4;
@@ -106,7 +117,7 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
     let pixels: Vec<usize> = (0..records.pixel_count())
         .filter(|&p| records.weight[p] > 0.0)
         .collect();
-    let walks = WALKS_PER_PIXEL.div_ceil(records.samples_per_pixel.max(1));
+    let walks = walks_per_pixel(pixels.len()).div_ceil(records.samples_per_pixel.max(1));
     let seeds: Vec<u64> = (0..walks as u64)
         .map(|w| options.seed.wrapping_add(DEFECT_STREAMS).wrapping_add(w))
         .collect();
