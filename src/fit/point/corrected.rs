@@ -26,9 +26,13 @@
 //! is a deterministic map and settles instead of chasing fresh noise. Their noise enters as a
 //! fixed offset to the photos, which moves the fit to first order only, symmetrically; the
 //! optimiser never sees a random objective. The derivatives are `tabulated`'s, so where the
-//! two models' slopes differ the fixed point is the
-//! minimiser of the corrected objective, which equals the stochastic model's when the model fits
-//! the photos (the residual is noise).
+//! two models' slopes differ the fixed point is the minimiser of the corrected objective, which
+//! equals the stochastic model's when the model fits the photos (the residual is noise).
+//!
+//! A fit that leaves `tabulated`'s table (alpha above [`tabulated::ALPHA_MAX`]) is not corrected
+//! further and is reported with `settled: false`: the table no longer stands for the model
+//! there, and exact walks at such roughness are long (a defect render at alpha 7.5 ran for more
+//! than 10 minutes before the start fix of `start::projected_start` removed that case).
 //!
 //! Applies to the L2 and relative-L2 losses (the defect is an additive offset to the
 //! prediction, which moving the targets represents exactly for L2 and to the noise scale's
@@ -36,7 +40,7 @@
 //! before, and so do the log-L1 and SSIM losses.
 
 use super::{fit_level, fit_point_direct, FitOptions, ModelFit, PointFit};
-use crate::bsdf::Model;
+use crate::bsdf::{tabulated, Model};
 use crate::error::Result;
 use crate::loss::LossKind;
 use crate::material::Material;
@@ -129,6 +133,9 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
     let mut corrected = records.clone();
     let mut settled = false;
     for _ in 0..MAX_ROUNDS {
+        if fit.material.alpha.iter().any(|&a| a > tabulated::ALPHA_MAX) {
+            break;
+        }
         let defect = defect(&fit, model, records, &pixels, &seeds);
         for (&p, d) in pixels.iter().zip(&defect) {
             for c in 0..3 {
