@@ -399,12 +399,15 @@ impl Heitz {
     }
 
     /// The random walk from `wi`: the escaping direction, the product of the Fresnel terms and
-    /// the number of vertices. The first visible normal comes from `u`.
-    fn walk(
+    /// the number of vertices. The first visible normal comes from `u`; `visit` receives the
+    /// cosine `wi_l . m` of each vertex in order (the argument of its Fresnel factor;
+    /// `tabulated` measures their distribution this way).
+    pub(crate) fn walk(
         &self,
         wi: Vec3<f64>,
         u: [f64; 2],
         rng: &mut Rng,
+        mut visit: impl FnMut(f64),
     ) -> Option<(Vec3<f64>, [f64; 3], u32)> {
         let mut flight = self.flight(-wi);
         let mut t = next_depth(&flight, 0.0, rng).unwrap_or(0.0);
@@ -412,7 +415,9 @@ impl Heitz {
         let mut order = 1u32;
         let mut uv = u;
         loop {
-            let (w, _, fr) = self.scatter(-flight.w, uv);
+            let wi_l = -flight.w;
+            let (w, m, fr) = self.scatter(wi_l, uv);
+            visit(wi_l.dot(m));
             for c in 0..3 {
                 weight[c] *= fr[c];
             }
@@ -461,7 +466,7 @@ impl Brdf for Heitz {
         if wi.z <= 0.0 {
             return None;
         }
-        let (wo, weight, bounces) = self.walk(wi, u, rng)?;
+        let (wo, weight, bounces) = self.walk(wi, u, rng, |_| ())?;
         Some(BrdfSample {
             wo,
             weight,
