@@ -11,7 +11,7 @@
 //! | `fast-msx` | [`fast_msx`] | analytic second bounce, Rosales et al. 2023; not energy conserving, not reciprocal |
 //! | `kulla-conty` | [`kulla_conty`] | tabulated energy compensation lobe, Kulla & Conty 2017; reciprocal |
 //! | `turquin` | [`turquin`] | tabulated scaling of the single lobe, Turquin 2019; not reciprocal |
-//! | `tabulated` | [`tabulated`] | `heitz`'s multiple-bounce lobe tabulated by order (Heitz et al. 2016), Fresnel per order by Kulla & Conty's `F_avg`; reciprocal |
+//! | `tabulated` | [`tabulated`] | `heitz`'s multiple-bounce lobe tabulated by order (Heitz et al. 2016), Fresnel per order from the walks' measured vertex cosines; reciprocal |
 //! | `bitterli` | [`bitterli`] | stochastic, position-free, unbiased; Bitterli & d'Eon 2022 |
 //! | `cui` | [`cui`] | stochastic, position-free, unbiased; Cui et al. 2023 |
 //! | `heitz` | [`heitz`] | stochastic random walk with explicit heights, Heitz et al. 2016 (the reference) |

@@ -8,14 +8,14 @@
 //! | --- | --- | --- |
 //! | `alpha` (`ax`, `ay`) | > 0; tabulated on [`ALPHA_MIN`, `ALPHA_MAX`] | microfacet roughness; anisotropic surfaces read the table at `sqrt(ax ay)` (an approximation, as `kulla-conty` makes) |
 //! | `ndf` | `ggx`, `beckmann` | one table each |
-//! | `fresnel` | white, Schlick, conductor, dielectric | exact in the single bounce; per order by `F_avg` in the multiple bounces (below) |
+//! | `fresnel` | white, Schlick, conductor, dielectric | exact in the single bounce; per order in the multiple bounces by the measured distribution of the walks' vertex cosines ([`vertex_fresnel`], below) |
 //! | `height` | ignored | as `heitz`: the single bounce is the height-correlated one, the walk's first order |
 //!
 //! | property | value |
 //! | --- | --- |
-//! | value | `f = f_single(wi, wo) + sum_k w_k(F) T_k(alpha, theta_i, theta_o, phi) f_kc(wi, wo)`, `k` in {2, 3, >= 4}, with `f_kc = (1 - E(mu_i)) (1 - E(mu_o)) / (pi (1 - E_avg))` the white lobe of `kulla-conty` ([`AlbedoTable`]) |
+//! | value | `f = f_single(wi, wo) + sum_k W_k(F, alpha, theta_i, theta_o) T_k(alpha, theta_i, theta_o, phi) f_kc(wi, wo)`, `k` in {2, 3, >= 4}, with `f_kc = (1 - E(mu_i)) (1 - E(mu_o)) / (pi (1 - E_avg))` the white lobe of `kulla-conty` ([`AlbedoTable`]) |
 //! | deterministic | yes; generic over the scalar, so the fitter gets exact dual-number derivatives in `alpha` and Fresnel (directions enter as constants, as in `kulla-conty`) |
-//! | table | `T_k`, the white-Fresnel `heitz` multiple-bounce BRDF of order 2, 3 and >= 4 divided by `f_kc`, on [`ALPHA_COUNT`] values of `alpha` log-uniform in [[`ALPHA_MIN`], [`ALPHA_MAX`]] x [`THETA_COUNT`]^2 polar angles over [0, [`THETA_MAX_DEG`]] deg, denser toward grazing ([`theta_node`]) x [`PHI_COUNT`] azimuth differences over [0, 180] deg, denser toward 180 ([`phi_node`]); GGX and Beckmann; f32 in `heitz_table.bin` (2.2 MiB) |
+//! | table | `T_k`, the white-Fresnel `heitz` multiple-bounce BRDF of order 2, 3 and >= 4 divided by `f_kc`, on [`ALPHA_COUNT`] values of `alpha` log-uniform in [[`ALPHA_MIN`], [`ALPHA_MAX`]] x [`THETA_COUNT`]^2 polar angles over [0, [`THETA_MAX_DEG`]] deg, denser toward grazing ([`theta_node`]) x [`PHI_COUNT`] azimuth differences over [0, 180] deg, denser toward 180 ([`phi_node`]); GGX and Beckmann; f32 in `heitz_table.bin` (2.2 MiB). Beside it, for the Fresnel weights, the distributions of the walks' vertex cosines ([`vertex_fresnel`], `vertex_cosines.bin`, 87 kB) |
 //! | interpolation | multilinear in (`ln alpha`, `theta_i`, `theta_o`, `phi`), clamped to the grid, times `f_kc` at the true directions and roughness; the derivative in `alpha` is that of this interpolant, exactly. Dividing by `f_kc` takes out the steep growth of the lost energy toward grazing and with roughness; the warped direction grids resolve the narrow forward lobe of smooth surfaces (on uniform 6- and 10-degree grids the white furnace came out 6% high at alpha 0.1 and 80 deg). Below `ALPHA_MIN` the first node's ratio multiplies the true `f_kc`, so the lobe fades with the energy it carries |
 //! | reciprocal | exactly: the table is symmetric in (`theta_i`, `theta_o`) by construction (below), and so is its interpolation |
 //! | energy | white furnace 1 up to table error (measured in the tests below) |
@@ -40,42 +40,43 @@
 //! negligible (smooth surfaces far from the forward lobe) or at 89.5 deg, where rare walks
 //! leave large contributions.
 //!
-//! # Fresnel (derivation)
+//! # Fresnel
 //!
 //! `heitz` multiplies a path of order `k` by `prod_{j=1..k} F(wi_j . h_j)`, the Fresnel factor of
 //! each vertex, so the coloured value of order `k` is the white path integral with that
 //! product inside. Tabulating it for every Fresnel is impossible (the product depends on each
-//! vertex's angle); Kulla & Conty 2017 ("Revisiting Physically Based Shading at Imageworks",
-//! SIGGRAPH course, section "Multiple scattering microfacet BSDFs with Fresnel") replace each
-//! factor by its cosine-weighted hemispherical average
-//! `F_avg = 2 integral_0^1 F(mu) mu dmu`, which makes order `k` `F_avg^k` times its white value:
-//! `w_2 = F_avg^2`, `w_3 = F_avg^3`. Their energy model behind
-//! `F_ms = F_avg^2 E_avg / (1 - F_avg (1 - E_avg))` is the geometric series in which a ray
-//! scatters once more with probability `rho = 1 - E_avg`, so order `k` carries white energy
-//! `E_avg rho^(k-1)`; the orders >= 4, tabulated together, are therefore weighted by
-//! `w_4+ = sum_{k>=4} F_avg^k rho^(k-1) / sum_{k>=4} rho^(k-1) = F_avg^4 (1 - rho) / (1 - F_avg rho)`.
-//! Every weight is 1 for white Fresnel, so the white lobe is `heitz`'s up to table error.
-//! The approximation is `F(cos_j) ~ F_avg` at every vertex; for a conductor it errs where
-//! `F` varies over the angles the walks meet, and long walks meet more grazing facets than
-//! the cosine weighting assumes, so `F_avg^k` comes out too dark at high roughness.
+//! vertex's angle). [`vertex_fresnel`] weighs order `k` by the path-weighted mean `W_k` of the
+//! product instead, factored by vertex role (first, inner, last) from the distribution of the
+//! cosines at which the walks meet their facets, measured once per roughness, entry angle and
+//! order (derivation there). Every weight is 1 for white Fresnel, so the white lobe is
+//! `heitz`'s up to table error.
+//!
+//! Kulla & Conty 2017 ("Revisiting Physically Based Shading at Imageworks", SIGGRAPH course)
+//! assume instead that every vertex sees the cosine-weighted hemisphere, `W_k = F_avg^k` with
+//! `F_avg = 2 integral_0^1 F(mu) mu dmu`, as `kulla-conty` does. The walks of rough surfaces
+//! meet far more grazing facets than that, so `F_avg^k` is too dark for a coloured conductor:
+//! it put this model's copper albedo 6.2% below `heitz`'s at alpha 1.5 and biased fits of
+//! heitz-rendered copper and gold photos 3.6-9.5% low at alpha 1.2-1.5 (`docs/fidelity.md`).
 //!
 //! # Measured error (tests in `tabulated/tests.rs`)
 //!
 //! | check | result |
 //! | --- | --- |
-//! | against converged `heitz` (2^16 evaluations each) on 128 `bench` configurations (GGX alpha 0.05-1.5, directions to 85 deg), relative error of the total value | white: RMS 0.48% (of which `heitz`'s own noise sigma 0.31%), worst -2.5% (alpha 0.05, `wi` at 82 deg); copper: RMS 0.82% (sigma 0.14%), worst -3.2% (alpha 0.36, both directions grazing) |
+//! | against converged `heitz` (2^16 evaluations each) on 128 `bench` configurations (GGX alpha 0.05-1.5, directions to 85 deg), relative error of the total value | white: RMS 0.48% (of which `heitz`'s own noise sigma 0.31%), worst -2.5% (alpha 0.05, `wi` at 82 deg); copper: RMS 0.56% (sigma 0.14%; 0.82% with `F_avg^k`), worst +2.5% (alpha 0.32, `wi` at 80 deg) |
 //! | white furnace, alpha 0.1-2.5, incidence 0-80 deg, GGX and Beckmann | within 1.1% of 1 (worst +1.09%, Beckmann alpha 0.1 at 80 deg) |
-//! | copper directional albedo against `heitz`'s | -1.7% at alpha 0.3 (80 deg) to -6.2% (green) at alpha 1.5: the `F_avg` weighting's error, largest where walks are long |
+//! | copper directional albedo against `heitz`'s, alpha 0.3, 0.9, 1.5 at 0, 60, 80 deg | within 0.3% except +1.8% (blue) at alpha 1.5 and normal incidence, the factoring's error (with `F_avg^k`: -1.7% to -6.2%) |
 //! | reciprocity | exact (1e-12), value and alpha derivative |
 
 use super::albedo_table::{log_cell, AlbedoTable};
-use super::kulla_conty::fresnel_average;
 use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
 use super::{Rng, ScalarBrdf};
 use crate::microfacet::{Height, NdfKind};
 use crate::scalar::{Real, Rgb, Vec3};
 use std::sync::OnceLock;
+use vertex_fresnel::OrderFresnel;
+
+mod vertex_fresnel;
 
 pub const ALPHA_COUNT: usize = 20;
 pub const ALPHA_MIN: f64 = 0.02;
@@ -104,14 +105,20 @@ pub fn alpha_node(i: usize) -> f64 {
 /// denser toward `max`, where the multiple-bounce lobe of smooth surfaces is narrow (grazing
 /// `theta`, forward azimuth `phi = pi`).
 fn warped_node(j: usize, count: usize, max: f64) -> f64 {
-    let x = j as f64 / (count - 1) as f64;
-    max * (1.0 - (1.0 - x).powf(1.5))
+    let y = 1.0 - j as f64 / (count - 1) as f64;
+    max * (1.0 - y * y.sqrt())
 }
 
-/// Lower node and weight of the upper one of `v` on the grid of [`warped_node`], linear in
-/// `v` within a cell, clamped to the grid.
-fn warped_cell(v: f64, count: usize, max: f64) -> (usize, f64) {
-    let x = 1.0 - (1.0 - (v / max).clamp(0.0, 1.0)).powf(2.0 / 3.0);
+/// The warped coordinate `x` in [0, 1] of `v` in [0, `max`] (clamped): the nodes of every
+/// grid of [`warped_node`] sit at `x = j / (count - 1)`.
+fn warped_x(v: f64, max: f64) -> f64 {
+    let y = 1.0 - (v / max).clamp(0.0, 1.0);
+    1.0 - (y * y).cbrt()
+}
+
+/// Lower node and weight of the upper one of `v` (at warped coordinate `x`, [`warped_x`]) on
+/// the grid of [`warped_node`], linear in `v` within a cell, clamped to the grid.
+fn warped_cell(v: f64, x: f64, count: usize, max: f64) -> (usize, f64) {
     let j = ((x * (count - 1) as f64) as usize).min(count - 2);
     let (lo, hi) = (warped_node(j, count, max), warped_node(j + 1, count, max));
     (j, ((v - lo) / (hi - lo)).clamp(0.0, 1.0))
@@ -175,7 +182,7 @@ impl HeitzTable {
 }
 
 /// `single` plus the tabulated multiple-bounce lobe of `heitz`.
-#[derive(Clone, Copy)]
+#[derive(Clone)]
 pub struct Tabulated<T> {
     /// The exact single bounce, height-correlated (the first order of `heitz`'s walk).
     pub single: SingleBounce<T>,
@@ -184,8 +191,10 @@ pub struct Tabulated<T> {
     /// `sqrt(ax ay)` and its cell.
     alpha: T,
     alpha_cell: (usize, T),
-    /// `w_k / (pi (1 - E_avg))` per order and channel (see the module doc).
-    weights: [Rgb<T>; ORDERS],
+    /// `1 / (pi (1 - E_avg))`, the normalisation of `f_kc`.
+    scale: T,
+    /// The Fresnel weight of each order ([`vertex_fresnel`]).
+    fresnel: OrderFresnel<T>,
 }
 
 impl<T: Real> Tabulated<T> {
@@ -198,8 +207,6 @@ impl<T: Real> Tabulated<T> {
         let alpha = (single.microfacet.ax * single.microfacet.ay).sqrt();
         let albedo = AlbedoTable::get(ndf, Height::Correlated);
         let rho = (T::one() - albedo.e_avg(alpha)).max_c(0.0);
-        let f_avg = fresnel_average(&single.fresnel);
-        let tail = f_avg.map(|f| f.powi(4) * (T::one() - rho) / (T::one() - f * rho));
         // As `kulla-conty`: below 1e-9 of lost energy the lobe is nothing, and `f_kc` would
         // divide the table's `1 - E(mu)` (interpolated, not exactly 0 at grazing) by ~0.
         let scale = if rho.re64() < 1e-9 {
@@ -207,13 +214,15 @@ impl<T: Real> Tabulated<T> {
         } else {
             (T::c(std::f64::consts::PI) * rho).recip()
         };
+        let alpha_cell = log_cell(alpha, ALPHA_MIN, ALPHA_MAX, ALPHA_COUNT);
         Tabulated {
             single,
             table: HeitzTable::get(ndf),
             albedo,
             alpha,
-            alpha_cell: log_cell(alpha, ALPHA_MIN, ALPHA_MAX, ALPHA_COUNT),
-            weights: [f_avg.map(|f| f * f), f_avg.map(|f| f.powi(3)), tail].map(|w| w.scale(scale)),
+            alpha_cell,
+            scale,
+            fresnel: OrderFresnel::new(&single.fresnel, ndf, alpha_cell),
         }
     }
 
@@ -226,21 +235,21 @@ impl<T: Real> Tabulated<T> {
         let (xi, yi, xo, yo) = (wi.x.re64(), wi.y.re64(), wo.x.re64(), wo.y.re64());
         let phi = (xi * yo - yi * xo).abs().atan2(xi * xo + yi * yo);
         let theta_max = THETA_MAX_DEG.to_radians();
+        let (theta_i, theta_o) = (zi.min(1.0).acos(), zo.min(1.0).acos());
+        let (xi, xo) = (warped_x(theta_i, theta_max), warped_x(theta_o, theta_max));
+        let pi = std::f64::consts::PI;
         let cells = [
-            warped_cell(zi.min(1.0).acos(), THETA_COUNT, theta_max),
-            warped_cell(zo.min(1.0).acos(), THETA_COUNT, theta_max),
-            warped_cell(phi, PHI_COUNT, std::f64::consts::PI),
+            warped_cell(theta_i, xi, THETA_COUNT, theta_max),
+            warped_cell(theta_o, xo, THETA_COUNT, theta_max),
+            warped_cell(phi, warped_x(phi, pi), PHI_COUNT, pi),
         ];
         let (i, t) = self.alpha_cell;
         let below = self.table.directional(i, cells);
         let above = self.table.directional(i + 1, cells);
-        let mut sum = Rgb::splat(T::zero());
-        for k in 0..ORDERS {
-            let value = T::c(below[k]) * (T::one() - t) + T::c(above[k]) * t;
-            sum = sum + self.weights[k].scale(value);
-        }
+        let values = std::array::from_fn(|k| T::c(below[k]) + T::c(above[k] - below[k]) * t);
+        let sum = self.fresnel.weigh(xi, xo, values);
         let lost = |z: f64| (T::one() - self.albedo.e(z, self.alpha)).max_c(0.0);
-        sum.scale(lost(zi) * lost(zo))
+        sum.scale(lost(zi) * lost(zo) * self.scale)
     }
 }
 

@@ -4,7 +4,7 @@
 //!
 //! | piece | how |
 //! | --- | --- |
-//! | dependence on F0 | each pixel's prediction is a polynomial in a grey Schlick F0 of degree [`fresnel_degree`]: 1 for `single` (Schlick is linear in F0), 2 for `fast-msx` (`F^2`, eq. 19) and `turquin` (`f_single (1 + F0 k)`); the others are rational (`kulla-conty`'s `F_ms`, `tabulated`'s `F_avg` weights) or long polynomials (one Fresnel factor per bounce of a walk) and get degree 4 |
+//! | dependence on F0 | each pixel's prediction is a polynomial in a grey Schlick F0 of degree [`fresnel_degree`]: 1 for `single` (Schlick is linear in F0), 2 for `fast-msx` (`F^2`, eq. 19) and `turquin` (`f_single (1 + F0 k)`); the others are rational (`kulla-conty`'s `F_ms`) or long polynomials (`tabulated`'s per-order weights, one Fresnel factor per bounce of a walk) and get degree 4 |
 //! | basis | the model rendered at the Chebyshev-Lobatto nodes of F0 in [0, 1] (with the fit's common random numbers), converted to monomial coefficients per pixel |
 //! | diffuse | linear: the white Lambertian image [`crate::render::lambertian_pixels`] |
 //! | solve per channel | the weighted squared error `sum v (P(F0) + rho d - t)^2` from moment sums: `rho` in closed form, clamped to [0, 1] (non-negative least squares in one variable); `F0` by a scan of 201 points and golden-section refinement |
