@@ -381,14 +381,16 @@ impl TexelModel<'_> {
         let mut data_cost = 0.0;
         for (value, &p) in predicted.iter().zip(pixels) {
             let w = self.records.weight[p];
+            let scale = w / sigma2;
             for (v, t) in value.iter().zip(self.records.target[p]) {
                 let r = v.re - t;
                 let j: [f64; N] = v.eps.0.map_or([0.0; N], |d| d.into());
                 data_cost += w * r * r;
                 for a in 0..N {
-                    gradient[a] += w * r * j[a] / sigma2;
+                    let ja = scale * j[a];
+                    gradient[a] += ja * r;
                     for b in 0..=a {
-                        matrix[a * N + b] += w * j[a] * j[b] / sigma2;
+                        matrix[a * N + b] += ja * j[b];
                     }
                 }
             }
