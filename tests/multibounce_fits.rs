@@ -29,6 +29,20 @@ fn metal(symbol: &str) -> ([f64; 3], [f64; 3], [f64; 3]) {
     )
 }
 
+/// A metal's conductor Fresnel as a material file's JSON and as a `--fresnel-known` value.
+fn conductor(symbol: &str) -> (serde_json::Value, String) {
+    let (eta, k, _) = metal(symbol);
+    let known = format!(
+        "conductor:{}:{}",
+        eta.map(|v| v.to_string()).join(","),
+        k.map(|v| v.to_string()).join(",")
+    );
+    (
+        serde_json::json!({"kind": "conductor", "eta": eta, "k": k}),
+        known,
+    )
+}
+
 /// Nine 32x32 flash photos of `heitz` with the metal at `alpha`.
 fn heitz_set(dir: &Path, symbol: &str, alpha: f64) -> std::path::PathBuf {
     model_set(dir, "heitz", symbol, alpha)
@@ -36,9 +50,7 @@ fn heitz_set(dir: &Path, symbol: &str, alpha: f64) -> std::path::PathBuf {
 
 /// Nine 32x32 flash photos of `model` with the metal at `alpha`.
 fn model_set(dir: &Path, model: &str, symbol: &str, alpha: f64) -> std::path::PathBuf {
-    let (eta, k, _) = metal(symbol);
-    let fresnel = serde_json::json!({"kind": "conductor", "eta": eta, "k": k});
-    fresnel_set(dir, model, symbol, fresnel, alpha)
+    fresnel_set(dir, model, symbol, conductor(symbol).0, alpha)
 }
 
 /// Nine 32x32 flash photos of `model` with the Fresnel `fresnel` (a material file's `fresnel`
@@ -191,13 +203,7 @@ fn capped_walks_still_recover_the_roughness() {
 #[test]
 fn tabulated_fits_of_rough_heitz_photos_recover_alpha() {
     let dir = tempfile::tempdir().unwrap();
-    let (eta, k, _) = metal("Cu");
-    let copper = serde_json::json!({"kind": "conductor", "eta": eta, "k": k});
-    let copper_known = format!(
-        "conductor:{}:{}",
-        eta.map(|v| v.to_string()).join(","),
-        k.map(|v| v.to_string()).join(",")
-    );
+    let (copper, copper_known) = conductor("Cu");
     for (name, fresnel, extra, alpha, tolerance) in [
         (
             "white",
@@ -238,13 +244,7 @@ fn tabulated_fits_of_rough_heitz_photos_recover_alpha() {
 #[test]
 fn corrected_stochastic_fits_of_rough_heitz_photos_are_unbiased() {
     let dir = tempfile::tempdir().unwrap();
-    let (eta, k, _) = metal("Cu");
-    let copper = serde_json::json!({"kind": "conductor", "eta": eta, "k": k});
-    let copper_known = format!(
-        "conductor:{}:{}",
-        eta.map(|v| v.to_string()).join(","),
-        k.map(|v| v.to_string()).join(",")
-    );
+    let (copper, copper_known) = conductor("Cu");
     for (name, fresnel, known, alpha) in [
         (
             "white",
