@@ -14,19 +14,13 @@ mkdir -p "$out"
 cargo build --release --quiet
 bf=target/release/bouncefit
 
-# Normal-incidence reflectance at 650, 550, 450 nm (R, G, B) of the measured complex IORs in
-# ../shared/data/conductors_nk.json (Johnson & Christy 1972 via refractiveindex.info).
-declare -A F0=(
-  [Cu]="0.9352180977478067, 0.6235100886473987, 0.5382577162627749"
-  [Au]="0.9565222645090055, 0.7915532180129231, 0.4081937270148714"
-)
-sed 's/resolution = \[128, 128\]/resolution = [32, 32]/' \
-  datasets/sources/copper-flash.capture.toml > "$out/capture.toml"
+source scripts/lib/flash-sets.sh
+small_flash_capture "$out/capture.toml"
 
-for metal in Cu Au; do
+for metal in copper gold; do
   for alpha in 0.2 0.5 0.8; do
     set="$out/$metal-$alpha"
-    echo "{\"model\": \"heitz\", \"alpha\": [$alpha, $alpha], \"fresnel\": {\"kind\": \"schlick\", \"f0\": [${F0[$metal]}]}}" \
+    echo "{\"model\": \"heitz\", \"alpha\": [$alpha, $alpha], \"fresnel\": {\"kind\": \"schlick\", \"f0\": [${METAL_F0[$metal]}]}}" \
       > "$set.material.json"
     "$bf" synth --material "$set.material.json" --capture "$out/capture.toml" -o "$set" \
       --pixel-samples 64 --seed 7 --force > /dev/null
@@ -35,7 +29,7 @@ for metal in Cu Au; do
     for model in single kulla-conty bitterli; do
       fit="$out/$metal-$alpha.$model.json"
       "$bf" fit "$set" --models "$model" --pixel-samples "$walks" -o "$fit" --force --quiet > /dev/null
-      python3 - "$fit" "$alpha" "${F0[$metal]}" "$metal" <<'PY'
+      python3 - "$fit" "$alpha" "${METAL_F0[$metal]}" "$metal" <<'PY'
 import json, sys
 fit = json.load(open(sys.argv[1]))
 alpha, truth, metal = float(sys.argv[2]), [float(v) for v in sys.argv[3].split(",")], sys.argv[4]

@@ -20,15 +20,8 @@ mkdir -p "$out"
 cargo build --release --quiet
 bf=target/release/bouncefit
 
-# Normal-incidence reflectance at 650, 550, 450 nm (R, G, B) of the measured complex IORs in
-# ../shared/data/conductors_nk.json (Johnson & Christy 1972 via refractiveindex.info).
-declare -A F0=(
-  [white]="1, 1, 1"
-  [copper]="0.9352180977478067, 0.6235100886473987, 0.5382577162627749"
-  [gold]="0.9565222645090055, 0.7915532180129231, 0.4081937270148714"
-)
-sed 's/resolution = \[128, 128\]/resolution = [32, 32]/' \
-  datasets/sources/copper-flash.capture.toml > "$out/capture.toml"
+source scripts/lib/flash-sets.sh
+small_flash_capture "$out/capture.toml"
 
 rows="$out/fits.tsv"
 : > "$rows"
@@ -36,11 +29,11 @@ for metal in white copper gold; do
   for alpha in 0.2 0.5 0.9 1.2 1.5; do
     for r in $(seq 1 "$repeats"); do
       set="$out/$metal-$alpha-$r"
-      echo "{\"model\": \"heitz\", \"alpha\": [$alpha, $alpha], \"fresnel\": {\"kind\": \"schlick\", \"f0\": [${F0[$metal]}]}}" \
+      echo "{\"model\": \"heitz\", \"alpha\": [$alpha, $alpha], \"fresnel\": {\"kind\": \"schlick\", \"f0\": [${METAL_F0[$metal]}]}}" \
         > "$set.material.json"
       "$bf" synth --material "$set.material.json" --capture "$out/capture.toml" -o "$set" \
         --pixel-samples 64 --seed "$((1000 + r))" --force > /dev/null
-      known="schlick:${F0[$metal]// /}"
+      known="schlick:${METAL_F0[$metal]// /}"
       for spp in 4 1; do
         for fit in "heitz corrected" "bitterli corrected" "cui corrected" "bitterli direct" \
           "tabulated -" "single -" "kulla-conty -" "turquin -" "fast-msx -"; do
