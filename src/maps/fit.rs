@@ -35,12 +35,12 @@ use super::{normal_from_slopes, to_shading_frame, MaterialMaps, TexelGrid};
 use crate::bsdf::{differentiable, BounceCap, Model, Rng};
 use crate::error::{Error, Result};
 use crate::fit::cholesky::Cholesky;
-use crate::fit::point::params::{logit, ParamSpace};
+use crate::fit::point::params::{logit, sigmoid, ParamSpace};
 use crate::material::{FresnelSpec, Material};
 use crate::progress::Progress;
 use crate::scalar::{Real, Rgb, Vec3};
 use crate::shading::ShadingRecords;
-use num_dual::DualSVec64;
+use num_dual::{Dual64, DualSVec64};
 use rand::SeedableRng;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -318,6 +318,21 @@ impl TexelModel<'_> {
 
     /// Predictions of `pixels` at coordinates `x`, at any scalar type.
     fn predict<T: Real>(&self, x: &[T], pixels: &[usize]) -> Vec<[T; 3]> {
+        let lambert = self.space.surface(&x[..self.space.dim()]).diffuse;
+        self.predict_parts(x, pixels)
+            .into_iter()
+            .map(|(specular, shading)| {
+                [0, 1, 2].map(|c| specular[c] + lambert[c] * T::c(FRAC_1_PI) * shading[c])
+            })
+            .collect()
+    }
+
+    /// Each pixel's prediction split by the diffuse albedo `rho`, which enters it linearly:
+    /// `specular + rho / pi * shading` per channel, where `specular` is the sub-sample mean of
+    /// `f cos_s / cos * E` and `shading` that of `cos_s / cos * E` (`cos_s / cos` the
+    /// foreshortening of the shading normal, 1 without normals). The diffuse coordinates of
+    /// `x` are not read, so a Jacobian needs no dual slots for them.
+    fn predict_parts<T: Real>(&self, x: &[T], pixels: &[usize]) -> Vec<([T; 3], [T; 3])> {
         let base = self.space.dim();
         let surface = self.space.surface(&x[..base]);
         let brdf = differentiable(self.space.model, surface.single, BounceCap::NONE)
@@ -325,13 +340,13 @@ impl TexelModel<'_> {
         let normal = self
             .normals
             .then(|| normal_from_slopes(x[base], x[base + 1]));
-        let lambert = surface.diffuse.map(|d| d * T::c(FRAC_1_PI));
         let spp = self.records.samples_per_pixel;
+        let mean = T::c(1.0 / spp as f64);
         let mut rng = Rng::seed_from_u64(0);
         pixels
             .iter()
             .map(|&p| {
-                let mut sum = [T::zero(); 3];
+                let (mut specular, mut shading) = ([T::zero(); 3], [T::zero(); 3]);
                 for s in p * spp..(p + 1) * spp {
                     let e = self.records.irradiance[s];
                     if e == [0.0; 3] {
@@ -353,38 +368,70 @@ impl TexelModel<'_> {
                     };
                     let Rgb(f) = brdf.eval_total(wi_l, wo_l, &mut rng);
                     for c in 0..3 {
-                        sum[c] += (f[c] + lambert[c]) * ratio * T::c(e[c]);
+                        let weight = ratio * T::c(e[c]);
+                        specular[c] += f[c] * weight;
+                        shading[c] += weight;
                     }
                 }
-                sum.map(|v| v / T::c(spp as f64))
+                (specular.map(|v| v * mean), shading.map(|v| v * mean))
             })
             .collect()
     }
 
     /// `(cost, gradient, Gauss-Newton matrix, data cost, data precision)` of the texel's MAP
     /// objective `sum w (p - t)^2 / sigma^2 + sum precision (x - centre)^2` at `x`.
-    fn linearise<const N: usize>(
+    ///
+    /// `N` is [`TexelModel::dim`] and `M = N - 3`: the kernel runs in dual numbers over the
+    /// specular coordinates and slopes only (`M` slots), and the diffuse albedo's columns of
+    /// the Jacobian come from [`TexelModel::predict_parts`]'s linear split, `d p_c / d rho_c =
+    /// shading_c / pi`. That keeps three of the seven (nine with normals) derivative slots out
+    /// of every kernel operation.
+    fn linearise<const N: usize, const M: usize>(
         &self,
         x: &[f64],
         pixels: &[usize],
         sigma2: f64,
         prior: &Prior,
     ) -> (f64, Vec<f64>, Vec<f64>, f64, Vec<f64>) {
-        let coords: Vec<DualSVec64<N>> = x
+        let diffuse_at = self.specular_dim();
+        let slot = |i: usize| if i < diffuse_at { i } else { i - 3 };
+        let coords: Vec<DualSVec64<M>> = x
             .iter()
             .enumerate()
-            .map(|(i, &v)| DualSVec64::from_re(v).derivative(i))
+            .map(|(i, &v)| match i.checked_sub(diffuse_at) {
+                Some(c) if c < 3 => DualSVec64::from_re(v),
+                _ => DualSVec64::from_re(v).derivative(slot(i)),
+            })
             .collect();
-        let predicted = self.predict(&coords, pixels);
+        let lambert = [0, 1, 2].map(|c| {
+            let rho = sigmoid(Dual64::from_re(x[diffuse_at + c]).derivative());
+            (rho.re * FRAC_1_PI, rho.eps * FRAC_1_PI)
+        });
+        let parts = self.predict_parts(&coords, pixels);
         let mut gradient = vec![0.0; N];
         let mut matrix = vec![0.0; N * N];
         let mut data_cost = 0.0;
-        for (value, &p) in predicted.iter().zip(pixels) {
+        for ((specular, shading), &p) in parts.iter().zip(pixels) {
             let w = self.records.weight[p];
             let scale = w / sigma2;
-            for (v, t) in value.iter().zip(self.records.target[p]) {
-                let r = v.re - t;
-                let j: [f64; N] = v.eps.0.map_or([0.0; N], |d| d.into());
+            for c in 0..3 {
+                let (l, dl) = lambert[c];
+                let r = specular[c].re + l * shading[c].re - self.records.target[p][c];
+                let ds: [f64; M] = specular[c].eps.0.map_or([0.0; M], |d| d.into());
+                let dw: [f64; M] = shading[c].eps.0.map_or([0.0; M], |d| d.into());
+                let mut j = [0.0; N];
+                for (a, ja) in j.iter_mut().enumerate() {
+                    *ja = match a.checked_sub(diffuse_at) {
+                        Some(d) if d < 3 => {
+                            if d == c {
+                                dl * shading[c].re
+                            } else {
+                                0.0
+                            }
+                        }
+                        _ => ds[slot(a)] + l * dw[slot(a)],
+                    };
+                }
                 data_cost += w * r * r;
                 for a in 0..N {
                     let ja = scale * j[a];
@@ -424,7 +471,7 @@ impl TexelModel<'_> {
     }
 
     /// Levenberg-Marquardt (Marquardt's diagonal scaling) from `x`, exact Jacobians.
-    fn solve<const N: usize>(
+    fn solve<const N: usize, const M: usize>(
         &self,
         mut x: Vec<f64>,
         pixels: &[usize],
@@ -442,7 +489,7 @@ impl TexelModel<'_> {
         }
         let mut damping = 1e-3;
         let (mut cost, mut gradient, mut matrix, mut data_cost, mut precision) =
-            self.linearise::<N>(&x, pixels, sigma2, prior);
+            self.linearise::<N, M>(&x, pixels, sigma2, prior);
         for _ in 0..MAX_ITERATIONS {
             let mut improved = false;
             for _ in 0..10 {
@@ -465,7 +512,7 @@ impl TexelModel<'_> {
                     let gain = cost - trial_cost;
                     x = trial;
                     (cost, gradient, matrix, data_cost, precision) =
-                        self.linearise::<N>(&x, pixels, sigma2, prior);
+                        self.linearise::<N, M>(&x, pixels, sigma2, prior);
                     damping = (damping / 3.0).max(1e-9);
                     improved = gain > 1e-9 * cost.max(1e-12);
                     break;
@@ -488,12 +535,11 @@ impl TexelModel<'_> {
     /// [`TexelModel::solve`] with `N` = [`TexelModel::dim`].
     fn solve_any(&self, x: Vec<f64>, pixels: &[usize], sigma2: f64, prior: &Prior) -> TexelFit {
         match self.dim() {
-            2 => self.solve::<2>(x, pixels, sigma2, prior),
-            4 => self.solve::<4>(x, pixels, sigma2, prior),
-            5 => self.solve::<5>(x, pixels, sigma2, prior),
-            6 => self.solve::<6>(x, pixels, sigma2, prior),
-            7 => self.solve::<7>(x, pixels, sigma2, prior),
-            9 => self.solve::<9>(x, pixels, sigma2, prior),
+            4 => self.solve::<4, 1>(x, pixels, sigma2, prior),
+            5 => self.solve::<5, 2>(x, pixels, sigma2, prior),
+            6 => self.solve::<6, 3>(x, pixels, sigma2, prior),
+            7 => self.solve::<7, 4>(x, pixels, sigma2, prior),
+            9 => self.solve::<9, 6>(x, pixels, sigma2, prior),
             n => unreachable!("a maps fit has 4 to 9 coordinates, not {n}"),
         }
     }
