@@ -10,6 +10,7 @@
 //! | `batch_ns_per_eval` | thread CPU time per pair of [`BatchRecords::render`] (one record per pixel) with `f32` lanes, the fits' default, geometry prepared once as a fit prepares it |
 //! | `batch_f64_ns_per_eval` | the same with `f64` lanes |
 //! | `kulla_conty_ns_per_eval`, `kulla_conty_f64_ns_per_eval` | the same two for `kulla-conty` (single lobe and compensation lobe, [`Lobe::of`]) at the same material: the cost of its added lobe in the kernel |
+//! | `fast_msx_ns_per_eval`, `fast_msx_f64_ns_per_eval` | the same two for `fast-msx` (single lobe and its second-bounce lobe) |
 //! | `batch_prepare_ns_per_eval` | thread CPU time per pair of [`BatchRecords::new`]: the one-off cost, for comparison with kernels that take raw direction pairs |
 //! | `speedup` | `scalar_ns_per_eval / batch_ns_per_eval` |
 
@@ -38,6 +39,8 @@ pub struct KernelRow {
     pub batch_ns_per_eval: f64,
     pub batch_f64_ns_per_eval: f64,
     pub kulla_conty_ns_per_eval: f64,
+    pub fast_msx_ns_per_eval: f64,
+    pub fast_msx_f64_ns_per_eval: f64,
     pub kulla_conty_f64_ns_per_eval: f64,
     pub batch_prepare_ns_per_eval: f64,
     pub speedup: f64,
@@ -101,17 +104,19 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
             }
         });
         let batch_ns = |model: Model, precision: Precision| {
-            let batch = BatchRecords::with_precision(&records, &all, precision);
+            let batch = BatchRecords::for_model(&records, &all, precision, model);
             let lobe = Lobe::of(model, &single).expect("a model the kernel serves");
             per_pair(pairs, seconds, || {
                 black_box(batch.render(black_box(lobe), [0.0; 3]));
             })
         };
-        let [batch_ns, batch_f64_ns, kulla_conty_ns, kulla_conty_f64_ns] = [
+        let [batch_ns, batch_f64_ns, kulla_conty_ns, kulla_conty_f64_ns, fast_msx_ns, fast_msx_f64_ns] = [
             (Model::Single, Precision::F32),
             (Model::Single, Precision::F64),
             (Model::KullaConty, Precision::F32),
             (Model::KullaConty, Precision::F64),
+            (Model::FastMsx, Precision::F32),
+            (Model::FastMsx, Precision::F64),
         ]
         .map(|(model, precision)| batch_ns(model, precision));
         let prepare = per_pair(pairs, seconds, || {
@@ -124,6 +129,8 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
             batch_f64_ns_per_eval: batch_f64_ns,
             kulla_conty_ns_per_eval: kulla_conty_ns,
             kulla_conty_f64_ns_per_eval: kulla_conty_f64_ns,
+            fast_msx_ns_per_eval: fast_msx_ns,
+            fast_msx_f64_ns_per_eval: fast_msx_f64_ns,
             batch_prepare_ns_per_eval: prepare,
             speedup: scalar / batch_ns,
         }

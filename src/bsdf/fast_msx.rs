@@ -45,6 +45,34 @@ pub struct FastMsx<T> {
     pub single: SingleBounce<T>,
 }
 
+/// The direction-only part of `f_I` (eq. 16-17, 20) for light `l` and camera `v`: the tilted
+/// normal `m_I` at which `D_I` is read (`theta_m` toward the azimuth of `h`) and
+/// `G_I / (2 c.v)`; `None` where the lobe vanishes (`G_I <= 0` or `c.v <= 0`). Shared by the
+/// scalar lobe and the batch kernel, which prepares it once per record.
+pub fn indirect_geometry(l: Vec3<f64>, v: Vec3<f64>) -> Option<([f64; 3], f64)> {
+    let h = (l + v).normalize();
+    let c = (h + Vec3::new(0.0, 0.0, 1.0)).normalize();
+    let cos_vc = c.dot(v).clamp(-1.0, 1.0);
+    let theta_vc = cos_vc.acos();
+    let theta_m = (PI - v.dot(l).clamp(-1.0, 1.0).acos()) * 0.25;
+    let g_i = 1.0 - ((theta_vc - theta_m).sin() / (theta_vc + theta_m).sin()).max(0.0);
+    if g_i <= 0.0 || cos_vc <= 0.0 {
+        return None;
+    }
+    let horizontal = (h.x * h.x + h.y * h.y).sqrt();
+    let (cos_phi, sin_phi) = if horizontal > 0.0 {
+        (h.x / horizontal, h.y / horizontal)
+    } else {
+        (1.0, 0.0)
+    };
+    let m_i = [
+        theta_m.sin() * cos_phi,
+        theta_m.sin() * sin_phi,
+        theta_m.cos(),
+    ];
+    Some((m_i, g_i / (2.0 * cos_vc)))
+}
+
 impl<T: Real> FastMsx<T> {
     /// The indirect second-bounce lobe `f_I` (eq. 20), 1/sr.
     pub fn indirect(&self, wi: Vec3<T>, wo: Vec3<T>) -> Rgb<T> {
@@ -56,30 +84,12 @@ impl<T: Real> FastMsx<T> {
             Vec3::<f64>::from_f64(wi.re()),
             Vec3::<f64>::from_f64(wo.re()),
         );
-        let h = (l + v).normalize();
-        let c = (h + Vec3::new(0.0, 0.0, 1.0)).normalize();
-        let cos_vc = c.dot(v).clamp(-1.0, 1.0);
-        let theta_vc = cos_vc.acos();
-        let theta_m = (PI - v.dot(l).clamp(-1.0, 1.0).acos()) * 0.25;
-        let g_i = 1.0 - ((theta_vc - theta_m).sin() / (theta_vc + theta_m).sin()).max(0.0);
-        if g_i <= 0.0 || cos_vc <= 0.0 {
+        let Some((m_i, scale)) = indirect_geometry(l, v) else {
             return zero;
-        }
-        let horizontal = (h.x * h.x + h.y * h.y).sqrt();
-        let (cos_phi, sin_phi) = if horizontal > 0.0 {
-            (h.x / horizontal, h.y / horizontal)
-        } else {
-            (1.0, 0.0)
         };
-        let m_i = Vec3::from_f64([
-            theta_m.sin() * cos_phi,
-            theta_m.sin() * sin_phi,
-            theta_m.cos(),
-        ]);
-        let d_i = self.single.microfacet.d(m_i);
-        let f = self.single.fresnel.eval(T::c(l.dot(h)));
-        let scalar = d_i * T::c(g_i / (2.0 * cos_vc));
-        (f * f).scale(scalar)
+        let d_i = self.single.microfacet.d(Vec3::from_f64(m_i));
+        let f = self.single.fresnel.eval(T::c(l.dot((l + v).normalize())));
+        (f * f).scale(d_i * T::c(scale))
     }
 
     /// `(f_single, f_I)`.

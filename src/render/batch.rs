@@ -30,12 +30,13 @@
 //! bit-identical for any thread count.
 
 use crate::bsdf::albedo_table::{AlbedoTable, MU_COUNT};
+use crate::bsdf::fast_msx::indirect_geometry;
 use crate::bsdf::kulla_conty::KullaConty;
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::Model;
 use crate::microfacet::fresnel::{self, Fresnel};
 use crate::microfacet::{beckmann, ggx, Height, Microfacet, NdfKind};
-use crate::scalar::{Real, Rgb};
+use crate::scalar::{Real, Rgb, Vec3};
 use crate::shading::ShadingRecords;
 use num_dual::Dual64;
 use rayon::prelude::*;
@@ -70,14 +71,15 @@ pub enum Precision {
 
 impl Precision {
     /// The lanes a fit of `model` uses unless told otherwise: `f32` for `single` and
-    /// `turquin`; `f64` where the kernel adds a lobe (`kulla-conty`). Measured: with `f32`
-    /// lanes the cost's rounding stalls L-BFGS's last line searches, and a `kulla-conty` fit took
-    /// 288 evaluations against 67 with `f64` lanes on `aluminium-pinhole` (conductor) and 180
-    /// against 110 on `copper-flash`, to the same alpha; `f64` lanes cost less than that
+    /// `turquin`; `f64` where the kernel adds a lobe (`kulla-conty`, `fast-msx`). Measured:
+    /// with `f32` lanes the cost's rounding stalls L-BFGS's last line searches, and a
+    /// `kulla-conty` fit took 288 evaluations against 67 with `f64` lanes on
+    /// `aluminium-pinhole` (conductor) and 180 against 110 on `copper-flash`, `fast-msx` 234
+    /// against 57 and 124 against 65, to the same alpha; `f64` lanes cost less than that
     /// difference (docs/speed.md).
     pub fn default_for(model: Model) -> Precision {
         match model {
-            Model::KullaConty => Precision::F64,
+            Model::KullaConty | Model::FastMsx => Precision::F64,
             _ => Precision::default(),
         }
     }
@@ -131,12 +133,23 @@ struct Geometry<F> {
     mu_weight: [Vec<F>; 2],
     /// Irradiance of each record over the pixel's sub-sample count, per channel.
     weight: [Vec<F>; 3],
+    /// With Fast-MSX's lobe ([`Added::FastMsx`]), empty otherwise: the squared components of
+    /// its tilted normal `m_I` and `G_I / (2 c.v)` ([`indirect_geometry`]; `m_I = n` and 0
+    /// where the lobe vanishes).
+    indirect: [Vec<F>; 4],
 }
 
 impl<F: LaneFloat> Geometry<F> {
     /// Append one record: directions `wi`, `wo` (both above the surface), its half vector `h`
     /// and its weight per channel, computed in `f64` and rounded once.
-    fn push(&mut self, wi: [f64; 3], wo: [f64; 3], h: [f64; 3], weight: [f64; 3]) {
+    fn push(
+        &mut self,
+        wi: [f64; 3],
+        wo: [f64; 3],
+        h: [f64; 3],
+        weight: [f64; 3],
+        indirect: bool,
+    ) {
         let lanes = [
             (&mut self.hx2, h[0] * h[0]),
             (&mut self.hy2, h[1] * h[1]),
@@ -159,6 +172,14 @@ impl<F: LaneFloat> Geometry<F> {
         }
         for (lane, w) in self.weight.iter_mut().zip(weight) {
             lane.push(F::c(w));
+        }
+        if indirect {
+            let (m, scale) = indirect_geometry(Vec3::from_f64(wi), Vec3::from_f64(wo))
+                .unwrap_or(([0.0, 0.0, 1.0], 0.0));
+            let values = [m[0] * m[0], m[1] * m[1], m[2] * m[2], scale];
+            for (lane, value) in self.indirect.iter_mut().zip(values) {
+                lane.push(F::c(value));
+            }
         }
     }
 
@@ -237,6 +258,10 @@ pub enum Added {
     /// Kulla & Conty 2017: the lobe `(1 - E(mu_i)) (1 - E(mu_o)) F_ms / (pi (1 - E_avg))`
     /// added to the single lobe ([`kulla_conty_lanes`]).
     KullaConty(&'static AlbedoTable),
+    /// Fast-MSX (Rosales et al. 2023 eq. 20): the lobe `D(m_I) G_I F(wi.h)^2 / (2 c.v)` added
+    /// to the single lobe ([`fast_msx_lanes`]); the records must carry its geometry
+    /// ([`BatchRecords::for_model`]).
+    FastMsx,
 }
 
 impl<'a> From<&'a SingleBounce<f64>> for Lobe<'a> {
@@ -250,7 +275,7 @@ impl<'a> From<&'a SingleBounce<f64>> for Lobe<'a> {
 
 impl<'a> Lobe<'a> {
     /// The whole value of `model` at `single`'s parameters, when the batch kernel evaluates
-    /// it: `single`, `turquin` and `kulla-conty`; `None` for the other models (the render
+    /// it: `single`, `turquin`, `kulla-conty` and `fast-msx`; `None` for the other models (the render
     /// plan gives their multiple-bounce term to the scalar kernel).
     pub fn of(model: Model, single: &'a SingleBounce<f64>) -> Option<Lobe<'a>> {
         let table = || AlbedoTable::get(single.microfacet.ndf, single.height);
@@ -258,6 +283,7 @@ impl<'a> Lobe<'a> {
             Model::Single => Added::None,
             Model::Turquin => Added::Turquin(table()),
             Model::KullaConty => Added::KullaConty(table()),
+            Model::FastMsx => Added::FastMsx,
             _ => return None,
         };
         Some(Lobe { single, added })
@@ -337,9 +363,21 @@ impl BatchRecords {
         pixels: &[usize],
         precision: Precision,
     ) -> BatchRecords {
+        BatchRecords::for_model(records, pixels, precision, Model::Single)
+    }
+
+    /// [`BatchRecords::with_precision`] with what [`Lobe::of`] `model` needs prepared besides
+    /// the single lobe's geometry (Fast-MSX's tilted normals).
+    pub fn for_model(
+        records: &ShadingRecords,
+        pixels: &[usize],
+        precision: Precision,
+        model: Model,
+    ) -> BatchRecords {
+        let indirect = model == Model::FastMsx;
         match precision {
             Precision::F32 => {
-                let (start, lambert, geometry) = gather::<f32>(records, pixels);
+                let (start, lambert, geometry) = gather::<f32>(records, pixels, indirect);
                 BatchRecords {
                     start,
                     lambert,
@@ -347,7 +385,7 @@ impl BatchRecords {
                 }
             }
             Precision::F64 => {
-                let (start, lambert, geometry) = gather::<f64>(records, pixels);
+                let (start, lambert, geometry) = gather::<f64>(records, pixels, indirect);
                 BatchRecords {
                     start,
                     lambert,
@@ -518,6 +556,7 @@ impl BatchRecords {
 fn gather<F: LaneFloat>(
     records: &ShadingRecords,
     pixels: &[usize],
+    indirect: bool,
 ) -> (Vec<usize>, Vec<[f64; 3]>, Geometry<F>) {
     let spp = records.samples_per_pixel;
     let mut start = Vec::with_capacity(pixels.len() + 1);
@@ -542,7 +581,7 @@ fn gather<F: LaneFloat>(
             let sum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
             let len = (sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]).sqrt();
             let h = sum.map(|v| v / len);
-            geometry.push(wi, wo, h, e.map(|e| e * norm));
+            geometry.push(wi, wo, h, e.map(|e| e * norm), indirect);
         }
         lambert_sums.push(lambert.map(|v| v * norm));
         start.push(geometry.hx2.len());
@@ -614,12 +653,16 @@ fn fill_lanes_any<F: LaneFloat>(
                 lanes,
             ))
         }
+        Added::FastMsx => fast_msx_lanes(geometry, single, range.clone(), tangents, lanes),
     }
     let scaled = matches!(lobe.added, Added::Turquin(_));
+    let squared = matches!(lobe.added, Added::FastMsx);
     for c in 0..3 {
         let w = &geometry.weight[c][range.clone()];
-        match colours {
-            None => weigh::<F, false>(
+        match (colours, squared) {
+            (Some(colours), _) => weigh::<F, true, false>(w, c, None, colours[c], tangents, lanes),
+            (None, true) => weigh::<F, false, true>(w, c, None, [F::zero(); 5], tangents, lanes),
+            (None, false) => weigh::<F, false, false>(
                 w,
                 c,
                 scaled.then_some(dalpha),
@@ -627,7 +670,6 @@ fn fill_lanes_any<F: LaneFloat>(
                 tangents,
                 lanes,
             ),
-            Some(colours) => weigh::<F, true>(w, c, None, colours[c], tangents, lanes),
         }
     }
 }
@@ -639,9 +681,11 @@ fn fill_lanes_any<F: LaneFloat>(
 /// `fresnel` becomes `w (F L + Q Phi)`, the Fresnel derivatives `w (L dF + Q dPhi)`, and
 /// `by_ax` gets `w (F dL/dax + Phi dQ/dax + Q dPhi/dax)` (`by_ay` alike). With Turquin's scale
 /// (`scaled`: `d alpha / d ax`, `d alpha / d ay`) `by_ax` also gets
-/// `w L scale_slope dalpha/dax` (see [`compensate`]).
+/// `w L scale_slope dalpha/dax` (see [`compensate`]). When `SQUARED`, the added lobe is
+/// `Q F^2` (Fast-MSX's, [`fast_msx_lanes`]): `fresnel` becomes `w F (L + Q F)`, the Fresnel
+/// derivatives `w dF (L + 2 Q F)` and `by_ax` `w F (dL/dax + F dQ/dax)`.
 #[inline(always)]
-fn weigh<F: LaneFloat, const ADDED: bool>(
+fn weigh<F: LaneFloat, const ADDED: bool, const SQUARED: bool>(
     w: &[F],
     c: usize,
     scaled: Option<[F; 2]>,
@@ -651,7 +695,7 @@ fn weigh<F: LaneFloat, const ADDED: bool>(
 ) {
     let n = w.len();
     let [phi, phi_ax, phi_ay, phi_a, phi_b] = colour;
-    let added_len = if ADDED { n } else { 0 };
+    let added_len = if ADDED || SQUARED { n } else { 0 };
     let q = &lanes.added[..added_len];
     let lobe = &lanes.lobe[..n];
     if tangents {
@@ -667,6 +711,14 @@ fn weigh<F: LaneFloat, const ADDED: bool>(
         let (q_ax, q_ay) = (&lanes.added_ax[..added_len], &lanes.added_ay[..added_len]);
         for l in 0..n {
             let (wl, wf) = (w[l] * lobe[l], w[l] * f[l]);
+            if SQUARED {
+                let slope = wl + F::c(2.0) * wf * q[l];
+                a[l] *= slope;
+                b[l] *= slope;
+                by_ax[l] = wf * (d_ax[l] + f[l] * q_ax[l]);
+                by_ay[l] = wf * (d_ay[l] + f[l] * q_ay[l]);
+                continue;
+            }
             a[l] *= wl;
             b[l] *= wl;
             by_ax[l] = wf * d_ax[l];
@@ -690,6 +742,10 @@ fn weigh<F: LaneFloat, const ADDED: bool>(
     }
     let f = &mut lanes.fresnel[c][..n];
     for l in 0..n {
+        if SQUARED {
+            f[l] *= w[l] * (lobe[l] + q[l] * f[l]);
+            continue;
+        }
         f[l] *= w[l] * lobe[l];
         if ADDED {
             f[l] += w[l] * q[l] * phi;
@@ -880,6 +936,67 @@ fn kulla_conty_records<F: LaneFloat, const TANGENTS: bool>(
             let d = dli * lo + li * dlo;
             q_ax[l] = d * dalpha[0];
             q_ay[l] = d * dalpha[1];
+        }
+    }
+}
+
+/// Fast-MSX (Rosales et al. 2023, [`crate::bsdf::fast_msx`]): its lobe is `Q F(wi.h)^2` with
+/// the channel-free `Q = D(m_I) G_I / (2 c.v)` (eq. 18-20), whose direction-only parts were
+/// prepared with the geometry ([`indirect_geometry`]). Fills [`Lanes::added`] with `Q` and,
+/// when `tangents`, `dQ/dax = Q d ln D(m_I) / d ax` (`dQ/day` alike) with the same `d ln D`
+/// as the single lobe's half vector (see [`ggx_lobes`], [`any_lobes`]); [`weigh`] squares the
+/// Fresnel. GGX in the lanes, Beckmann a record at a time through
+/// [`beckmann::density_stretched`].
+fn fast_msx_lanes<F: LaneFloat>(
+    geometry: &Geometry<F>,
+    single: &SingleBounce<f64>,
+    range: std::ops::Range<usize>,
+    tangents: bool,
+    lanes: &mut Lanes<F>,
+) {
+    let n = range.len();
+    let mf = &single.microfacet;
+    let (ax, ay) = (mf.ax, mf.ay);
+    let [mx2, my2, mz2, scale] = [0, 1, 2, 3].map(|k| &geometry.indirect[k][range.clone()]);
+    lanes.added.resize(n, F::zero());
+    let tangent_len = if tangents { n } else { 0 };
+    lanes.added_ax.resize(tangent_len.max(lanes.added_ax.len()), F::zero());
+    lanes.added_ay.resize(tangent_len.max(lanes.added_ay.len()), F::zero());
+    let q = &mut lanes.added[..n];
+    let (q_ax, q_ay) = (
+        &mut lanes.added_ax[..tangent_len],
+        &mut lanes.added_ay[..tangent_len],
+    );
+    match mf.ndf {
+        NdfKind::Ggx => {
+            let k = F::c(1.0 / (std::f64::consts::PI * ax * ay));
+            let (inv_ax2, inv_ay2) = (F::c(1.0 / (ax * ax)), F::c(1.0 / (ay * ay)));
+            let (inv_ax, inv_ay) = (F::c(1.0 / ax), F::c(1.0 / ay));
+            let (four_ax3, four_ay3) = (F::c(4.0 / (ax * ax * ax)), F::c(4.0 / (ay * ay * ay)));
+            for l in 0..n {
+                let t = mx2[l] * inv_ax2 + my2[l] * inv_ay2 + mz2[l];
+                let inv_t = F::one() / t;
+                let value = scale[l] * k * inv_t * inv_t;
+                q[l] = value;
+                if tangents {
+                    q_ax[l] = value * (four_ax3 * mx2[l] * inv_t - inv_ax);
+                    q_ay[l] = value * (four_ay3 * my2[l] * inv_t - inv_ay);
+                }
+            }
+        }
+        NdfKind::Beckmann => {
+            for l in 0..n {
+                let [mx2, my2, mz2, scale] = [mx2[l], my2[l], mz2[l], scale[l]].map(|v| v.re64());
+                let d = beckmann::density_stretched(mx2 / (ax * ax) + my2 / (ay * ay), mz2.sqrt());
+                let value = scale * d / (ax * ay);
+                q[l] = F::c(value);
+                if tangents {
+                    // d ln D / d a = -1/a + 2 m_a^2 / (a^3 m_z^2).
+                    let by = |a: f64, m2: f64| value * (2.0 * m2 / (a * a * a * mz2) - 1.0 / a);
+                    q_ax[l] = F::c(by(ax, mx2));
+                    q_ay[l] = F::c(by(ay, my2));
+                }
+            }
         }
     }
 }

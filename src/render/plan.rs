@@ -31,8 +31,8 @@
 //! `sparse-multi` applies to the models whose added term is an additive lobe (`kulla-conty`,
 //! `fast-msx` and the stochastic estimators); `turquin` scales the single lobe, so its added
 //! term has the single lobe's sharpness and is evaluated exactly. A fit's objective switches
-//! `sparse-multi` off for `kulla-conty` too: the batch kernel evaluates its lobe at every
-//! sub-sample for less than the anchors cost (`crate::render::batch::Lobe::of`).
+//! `sparse-multi` off for `kulla-conty` and `fast-msx` too: the batch kernel evaluates their
+//! lobes at every sub-sample for less than the anchors cost (`crate::render::batch::Lobe::of`).
 //! `faint-multi` applies to the energy-conserving models whose multiple scattering is bounded
 //! by the energy single scattering loses; `fast-msx` is not (its lobe can exceed it, see
 //! docs/models.md), so it keeps its term.

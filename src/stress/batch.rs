@@ -4,7 +4,7 @@
 //!
 //! | axis | values |
 //! | --- | --- |
-//! | model | `single`, `turquin` (the single lobe scaled by Turquin's compensation) and `kulla-conty` (plus its compensation lobe): the models a fit renders through the kernel ([`Lobe::of`]) |
+//! | model | `single`, `turquin` (the single lobe scaled by Turquin's compensation), `kulla-conty` (plus its compensation lobe) and `fast-msx` (plus its second-bounce lobe): the models a fit renders through the kernel ([`Lobe::of`]) |
 //! | surface | the sweep's surfaces of the model: GGX and Beckmann, both height models, every roughness (isotropic and anisotropic) and every Fresnel |
 //! | directions | the sweep's pairs, plus its below-horizon pairs mirrored to `z = +1e-7`: the kernel drops every pair with a direction at or below the horizon, so these are its grazing-most records |
 //!
@@ -156,7 +156,7 @@ pub fn sweep(model: Model, size: SweepSize, precision: Precision) -> BatchReport
         .collect();
     let records = ShadingRecords::of_pairs("stress", &raw);
     let all: Vec<usize> = (0..pairs.len()).collect();
-    let batch = BatchRecords::with_precision(&records, &all, precision);
+    let batch = BatchRecords::for_model(&records, &all, precision, model);
     let surfaces = super::surfaces(size, model);
     let query = |index: usize| Query {
         surface: surfaces[index / pairs.len()],
@@ -235,7 +235,7 @@ mod tests {
     #[test]
     fn batch_values_pass_the_quick_sweep() {
         for (precision, tolerance) in TOLERANCES {
-            for model in [Model::Single, Model::Turquin] {
+            for model in [Model::Single, Model::Turquin, Model::FastMsx] {
                 let r = sweep(model, SweepSize::Quick, precision);
                 assert_eq!(r.evaluations, 2 * r.configurations);
                 assert!(r.records > 0 && r.records < r.configurations);
@@ -255,7 +255,7 @@ mod tests {
     #[test]
     fn batch_tangents_are_finite_over_the_quick_sweep() {
         for (precision, _) in TOLERANCES {
-            for model in [Model::Single, Model::Turquin] {
+            for model in [Model::Single, Model::Turquin, Model::FastMsx] {
                 let r = sweep(model, SweepSize::Quick, precision);
                 assert_eq!(r.tangent_nonfinite, 0, "{model}: {:?}", r.first_bad_tangent);
             }

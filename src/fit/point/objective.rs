@@ -215,13 +215,14 @@ impl<'a> Objective<'a> {
                 GradientMethod::Fd => Precision::F64,
                 GradientMethod::Exact => self.precision,
             };
-            BatchRecords::with_precision(self.records, &self.pixels, precision)
+            BatchRecords::for_model(self.records, &self.pixels, precision, self.space.model)
         })
     }
 
     /// What the batch kernel renders when it evaluates the whole render at `single`'s
     /// parameters: the single lobe where the plan drops the multiple-bounce term, the model's
-    /// whole lobe where the kernel has it ([`Lobe::of`]: `single`, `turquin`, `kulla-conty`)
+    /// whole lobe where the kernel has it ([`Lobe::of`]: `single`, `turquin`, `kulla-conty`,
+    /// `fast-msx`)
     /// and the plan asks for it exactly; `None` otherwise (the exact single term still comes
     /// from the batch kernel through [`Objective::batch_shared`]). Every seed's render is
     /// then the same.

@@ -132,7 +132,7 @@ const PRECISIONS: [(Precision, f64, f64); 2] =
     [(Precision::F64, 1e-12, 1e-9), (Precision::F32, 2e-6, 5e-4)];
 
 /// The models whose whole value the batch kernel evaluates, other than `single`.
-const ADDED: [Model; 2] = [Model::Turquin, Model::KullaConty];
+const ADDED: [Model; 3] = [Model::Turquin, Model::KullaConty, Model::FastMsx];
 
 /// The scalar kernel's render of `model` on `single` (at any scalar type).
 fn scalar_render<T: Real>(
@@ -157,6 +157,11 @@ fn kulla_conty_batch_render_equals_its_scalar_render() {
 }
 
 #[test]
+fn fast_msx_batch_render_equals_its_scalar_render() {
+    check_renders(Model::FastMsx, 2000, 13);
+}
+
+#[test]
 fn batch_render_equals_the_scalar_render() {
     check_renders(Model::Single, 3000, 7);
 }
@@ -168,7 +173,7 @@ fn check_renders(model: Model, pixels: usize, seed: u64) {
     let pixels: Vec<usize> = (0..records.pixel_count()).collect();
     let diffuse = [0.1, 0.2, 0.3];
     for (precision, tolerance, _) in PRECISIONS {
-        let batch = BatchRecords::with_precision(&records, &pixels, precision);
+        let batch = BatchRecords::for_model(&records, &pixels, precision, model);
         let mut worst_of_all: f64 = 0.0;
         for single in surfaces() {
             let reference = scalar_render(model, single, diffuse, &records, &pixels);
@@ -219,7 +224,7 @@ fn check_tangents(model: Model) {
 fn check_tangents_in(precision: Precision, tolerance: f64, model: Model) {
     let records = random_records(1500, 11);
     let pixels: Vec<usize> = (0..records.pixel_count()).collect();
-    let batch = BatchRecords::with_precision(&records, &pixels, precision);
+    let batch = BatchRecords::for_model(&records, &pixels, precision, model);
     let worst_of_all = std::cell::Cell::new(0.0_f64);
     for single in surfaces() {
         let lobe = Lobe::of(model, &single).expect("served");
