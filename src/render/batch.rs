@@ -70,16 +70,16 @@ pub enum Precision {
 }
 
 impl Precision {
-    /// The lanes a fit of `model` uses unless told otherwise: `f32` for `single` and
-    /// `turquin`; `f64` where the kernel adds a lobe (`kulla-conty`, `fast-msx`). Measured:
-    /// with `f32` lanes the cost's rounding stalls L-BFGS's last line searches, and a
-    /// `kulla-conty` fit took 288 evaluations against 67 with `f64` lanes on
-    /// `aluminium-pinhole` (conductor) and 180 against 110 on `copper-flash`, `fast-msx` 234
-    /// against 57 and 124 against 65, to the same alpha; `f64` lanes cost less than that
-    /// difference (docs/speed.md).
+    /// The lanes a fit of `model` uses unless told otherwise: `f32` for `single`; `f64` where
+    /// the kernel adds a term (`turquin`, `kulla-conty`, `fast-msx`). Measured: with `f32`
+    /// lanes the cost's rounding stalls L-BFGS's last line searches, and on
+    /// `aluminium-pinhole` (conductor) and `copper-flash` a `kulla-conty` fit took 288 and 180
+    /// evaluations against 67 and 110 with `f64` lanes, `fast-msx` 234 and 124 against 57 and
+    /// 65, `turquin` 186 and 206 against 90 and 177, to the same alpha; `f64` lanes cost less
+    /// than that difference (docs/speed.md).
     pub fn default_for(model: Model) -> Precision {
         match model {
-            Model::KullaConty | Model::FastMsx => Precision::F64,
+            Model::Turquin | Model::KullaConty | Model::FastMsx => Precision::F64,
             _ => Precision::default(),
         }
     }
@@ -233,7 +233,8 @@ pub struct Lanes<F> {
     /// [`compensate`]).
     scale_slope: [Vec<F>; 3],
     /// With an added lobe (see [`Added`]): its channel-free part `Q` and `d Q / d ax`,
-    /// `d Q / d ay`.
+    /// `d Q / d ay`; with Turquin's scale, `g` and `dg / dalpha` in the first two
+    /// ([`compensate`]).
     added: Vec<F>,
     added_ax: Vec<F>,
     added_ay: Vec<F>,
@@ -640,9 +641,10 @@ fn fill_lanes_any<F: LaneFloat>(
     let mut colours = None;
     match lobe.added {
         Added::None => {}
-        Added::Turquin(table) => {
-            compensate(geometry, single, table, range.clone(), tangents, lanes)
+        Added::Turquin(table) if tangents => {
+            compensate::<F, true>(geometry, single, table, range.clone(), lanes)
         }
+        Added::Turquin(table) => compensate::<F, false>(geometry, single, table, range.clone(), lanes),
         Added::KullaConty(table) => {
             colours = Some(kulla_conty_lanes(
                 table,
@@ -876,6 +878,20 @@ fn kulla_conty_lanes<F: LaneFloat>(
     })
 }
 
+/// The `ln E` row of `table` at `alpha = sqrt(ax ay)` and its `alpha` derivative
+/// ([`AlbedoTable::ln_e_row`] in `Dual64`), padded to 64 nodes so that an index masked by 63
+/// needs no bounds check; and `alpha`.
+fn ln_e_rows<F: LaneFloat>(table: &AlbedoTable, ax: f64, ay: f64) -> (([F; 64], [F; 64]), f64) {
+    let alpha = Dual64::from_re((ax * ay).sqrt()).derivative();
+    let row = table.ln_e_row(alpha);
+    let (mut ln_e, mut d_ln_e) = ([F::zero(); 64], [F::zero(); 64]);
+    for (j, v) in row.iter().enumerate().take(MU_COUNT) {
+        ln_e[j] = F::c(v.re);
+        d_ln_e[j] = F::c(v.eps);
+    }
+    ((ln_e, d_ln_e), alpha.re)
+}
+
 /// `(1 - E, d (1 - E) / d alpha)` at the `mu` cell `(node, u)` from the `ln E` row and its
 /// slope `rows` (see [`kulla_conty_lanes`]); the slope only when `TANGENTS`.
 #[inline(always)]
@@ -909,15 +925,8 @@ fn kulla_conty_records<F: LaneFloat, const TANGENTS: bool>(
     lanes: &mut Lanes<F>,
 ) {
     let (ax, ay) = (single.microfacet.ax, single.microfacet.ay);
-    let alpha = Dual64::from_re((ax * ay).sqrt()).derivative();
-    let row = table.ln_e_row(alpha);
-    // The row padded to 64 nodes, so that an index masked by 63 needs no bounds check.
-    let (mut ln_e, mut d_ln_e) = ([F::zero(); 64], [F::zero(); 64]);
-    for (j, v) in row.iter().enumerate().take(MU_COUNT) {
-        ln_e[j] = F::c(v.re);
-        d_ln_e[j] = F::c(v.eps);
-    }
-    let dalpha = [alpha.re / (2.0 * ax), alpha.re / (2.0 * ay)].map(F::c);
+    let ((ln_e, d_ln_e), alpha) = ln_e_rows::<F>(table, ax, ay);
+    let dalpha = [alpha / (2.0 * ax), alpha / (2.0 * ay)].map(F::c);
     let n = range.len();
     let nodes = [0, 1].map(|side| &geometry.mu_node[side][range.clone()]);
     let weights = [0, 1].map(|side| &geometry.mu_weight[side][range.clone()]);
@@ -1006,37 +1015,53 @@ fn fast_msx_lanes<F: LaneFloat>(
 /// at `mu_o = wo.z` and `alpha = sqrt(ax ay)`, before the weighting step: `F` becomes
 /// `F S` (so the contribution is `w F S lobe`), `dF` becomes `dF S + F g dF0`, and
 /// `scale_slope` gets `F F0 dg/dalpha`, the part of `d (F S lobe) / d alpha` the lobe's own
-/// derivative misses (the weighting step adds it times `w lobe dalpha/da`). The table lookup
-/// runs a record at a time in `f64`.
-fn compensate<F: LaneFloat>(
+/// derivative misses (the weighting step adds it times `w lobe dalpha/da`).
+///
+/// `1 - E` and its `alpha` derivative come from the `ln E` row at `alpha`, as for Kulla &
+/// Conty's lobe ([`lost_energy`]); then `g = (1 - E) / E` and `dg/dalpha = d(1 - E)/dalpha /
+/// E^2`. The tables hold `E >= 0.02`, so the scalar model's floor of `E` at 1e-6 never binds.
+/// The per-record values go to [`Lanes::added`] (`g`) and [`Lanes::added_ax`] (`dg/dalpha`),
+/// which `turquin` has no other use for.
+#[inline(always)]
+fn compensate<F: LaneFloat, const TANGENTS: bool>(
     geometry: &Geometry<F>,
     single: &SingleBounce<f64>,
     table: &AlbedoTable,
     range: std::ops::Range<usize>,
-    tangents: bool,
     lanes: &mut Lanes<F>,
 ) {
     let n = range.len();
     let mf = &single.microfacet;
-    let alpha = Dual64::from_re((mf.ax * mf.ay).sqrt()).derivative();
-    let f0 = f0_with_tangents(&single.fresnel);
-    let oz = &geometry.oz[range];
-    for c in 0..3 {
-        lanes.scale_slope[c].resize(n, F::zero());
+    let (rows, _) = ln_e_rows::<F>(table, mf.ax, mf.ay);
+    let nodes = &geometry.mu_node[1][range.clone()];
+    let weights = &geometry.mu_weight[1][range];
+    lanes.added.resize(n, F::zero());
+    lanes.added_ax.resize(n, F::zero());
+    let (g, dg) = (&mut lanes.added[..n], &mut lanes.added_ax[..n]);
+    let one = F::one();
+    for l in 0..n {
+        let (lost, slope) = lost_energy::<F, TANGENTS>((&rows.0, &rows.1), nodes[l], weights[l]);
+        let inv_e = one / (one - lost);
+        g[l] = lost * inv_e;
+        dg[l] = slope * inv_e * inv_e;
     }
-    for (l, &mu) in oz.iter().enumerate() {
-        let e = table.e(mu.re64(), alpha).max_c(1e-6);
-        let g = (Dual64::from_re(1.0) - e).max_c(0.0) / e;
-        for (c, &(f0, df0_a, df0_b)) in f0.iter().enumerate() {
-            let f = lanes.fresnel[c][l].re64();
-            let scale = 1.0 + f0 * g.re;
-            if tangents {
-                let (a, b) = (&mut lanes.d_fresnel_a[c][l], &mut lanes.d_fresnel_b[c][l]);
-                *a = F::c(a.re64() * scale + f * g.re * df0_a);
-                *b = F::c(b.re64() * scale + f * g.re * df0_b);
-                lanes.scale_slope[c][l] = F::c(f * f0 * g.eps);
+    let (g, dg) = (&lanes.added[..n], &lanes.added_ax[..n]);
+    for (c, (f0, df0_a, df0_b)) in f0_with_tangents(&single.fresnel).into_iter().enumerate() {
+        let (f0, df0_a, df0_b) = (F::c(f0), F::c(df0_a), F::c(df0_b));
+        let fresnel = &mut lanes.fresnel[c][..n];
+        if TANGENTS {
+            lanes.scale_slope[c].resize(n, F::zero());
+            let (a, b) = (&mut lanes.d_fresnel_a[c][..n], &mut lanes.d_fresnel_b[c][..n]);
+            let slope = &mut lanes.scale_slope[c][..n];
+            for l in 0..n {
+                let (f, scale) = (fresnel[l], one + f0 * g[l]);
+                a[l] = a[l] * scale + f * g[l] * df0_a;
+                b[l] = b[l] * scale + f * g[l] * df0_b;
+                slope[l] = f * f0 * dg[l];
             }
-            lanes.fresnel[c][l] = F::c(f * scale);
+        }
+        for l in 0..n {
+            fresnel[l] *= one + f0 * g[l];
         }
     }
 }
