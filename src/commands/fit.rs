@@ -103,7 +103,7 @@ pub struct FitOptionArgs {
     pub no_skip: Vec<Skip>,
     /// Arithmetic of the batch kernel's lanes (see docs/speed.md): f32 (the fast path, the
     /// default of single) or f64 (the reference it is measured against, and the default of
-    /// turquin, kulla-conty and fast-msx, whose fits converge in fewer evaluations with it).
+    /// the multiple-bounce models, whose fits converge in fewer evaluations with it).
     #[arg(long, value_enum)]
     pub batch_precision: Option<Precision>,
     /// How heitz, bitterli and cui are fitted (see docs/reference.md): corrected (defect

@@ -70,17 +70,18 @@ pub enum Precision {
 }
 
 impl Precision {
-    /// The lanes a fit of `model` uses unless told otherwise: `f32` for `single`; `f64` where
-    /// the kernel adds a term (`turquin`, `kulla-conty`, `fast-msx`). Measured: with `f32`
-    /// lanes the cost's rounding stalls L-BFGS's last line searches, and on
-    /// `aluminium-pinhole` (conductor) and `copper-flash` a `kulla-conty` fit took 288 and 180
-    /// evaluations against 67 and 110 with `f64` lanes, `fast-msx` 234 and 124 against 57 and
-    /// 65, `turquin` 186 and 206 against 90 and 177, to the same alpha; `f64` lanes cost less
-    /// than that difference (docs/speed.md).
+    /// The lanes a fit of `model` uses unless told otherwise: `f32` for `single`, `f64` for
+    /// every model with a multiple-bounce term. Measured: with `f32` lanes the cost's rounding
+    /// stalls L-BFGS's last line searches of those fits. On `aluminium-pinhole` (conductor)
+    /// and `copper-flash`, `f32` against `f64` lanes took: `kulla-conty` 288 and 180
+    /// evaluations against 67 and 110, `fast-msx` 234 and 124 against 57 and 65, `turquin` 186
+    /// and 206 against 90 and 177, `tabulated` 206 and 272 against 73 and 195, `bitterli` 473
+    /// and 411 against 100 and 224, `wang-pt` 59 and 190 against 48 and 155, to the same alpha;
+    /// `f64` lanes cost less than that difference (docs/speed.md).
     pub fn default_for(model: Model) -> Precision {
         match model {
-            Model::Turquin | Model::KullaConty | Model::FastMsx => Precision::F64,
-            _ => Precision::default(),
+            Model::Single => Precision::F32,
+            _ => Precision::F64,
         }
     }
 }
