@@ -443,7 +443,8 @@ fn stress_quick_json_reports_every_model_clean() {
         // precisions: clean values and tangents, rounding-level agreement with the scalar
         // kernel (the bounds of src/stress/batch.rs).
         let batch = m["batch"].as_array().unwrap();
-        if ["single", "turquin", "kulla-conty"].contains(&m["model"].as_str().unwrap()) {
+        if ["single", "turquin", "kulla-conty", "fast-msx"].contains(&m["model"].as_str().unwrap())
+        {
             let precisions: Vec<&str> = batch
                 .iter()
                 .map(|b| b["precision"].as_str().unwrap())

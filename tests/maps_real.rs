@@ -115,7 +115,12 @@ fn maps_of_real_captures_predict_a_held_out_photo_better_than_a_uniform_material
     ] {
         let capture = dir.path().join(set);
         halved_capture(&real.join(set), &capture);
-        let (maps, baseline) = held_out(&capture, depth, &dir.path().join(format!("{set}-maps.json")), &[]);
+        let (maps, baseline) = held_out(
+            &capture,
+            depth,
+            &dir.path().join(format!("{set}-maps.json")),
+            &[],
+        );
         let (uniform, _) = held_out(
             &capture,
             depth,

@@ -143,14 +143,7 @@ struct Geometry<F> {
 impl<F: LaneFloat> Geometry<F> {
     /// Append one record: directions `wi`, `wo` (both above the surface), its half vector `h`
     /// and its weight per channel, computed in `f64` and rounded once.
-    fn push(
-        &mut self,
-        wi: [f64; 3],
-        wo: [f64; 3],
-        h: [f64; 3],
-        weight: [f64; 3],
-        indirect: bool,
-    ) {
+    fn push(&mut self, wi: [f64; 3], wo: [f64; 3], h: [f64; 3], weight: [f64; 3], indirect: bool) {
         let lanes = [
             (&mut self.hx2, h[0] * h[0]),
             (&mut self.hy2, h[1] * h[1]),
@@ -645,7 +638,9 @@ fn fill_lanes_any<F: LaneFloat>(
         Added::Turquin(table) if tangents => {
             compensate::<F, true>(geometry, single, table, range.clone(), lanes)
         }
-        Added::Turquin(table) => compensate::<F, false>(geometry, single, table, range.clone(), lanes),
+        Added::Turquin(table) => {
+            compensate::<F, false>(geometry, single, table, range.clone(), lanes)
+        }
         Added::KullaConty(table) => {
             colours = Some(kulla_conty_lanes(
                 table,
@@ -970,8 +965,12 @@ fn fast_msx_lanes<F: LaneFloat>(
     let [mx2, my2, mz2, scale] = [0, 1, 2, 3].map(|k| &geometry.indirect[k][range.clone()]);
     lanes.added.resize(n, F::zero());
     let tangent_len = if tangents { n } else { 0 };
-    lanes.added_ax.resize(tangent_len.max(lanes.added_ax.len()), F::zero());
-    lanes.added_ay.resize(tangent_len.max(lanes.added_ay.len()), F::zero());
+    lanes
+        .added_ax
+        .resize(tangent_len.max(lanes.added_ax.len()), F::zero());
+    lanes
+        .added_ay
+        .resize(tangent_len.max(lanes.added_ay.len()), F::zero());
     let q = &mut lanes.added[..n];
     let (q_ax, q_ay) = (
         &mut lanes.added_ax[..tangent_len],
@@ -1052,7 +1051,10 @@ fn compensate<F: LaneFloat, const TANGENTS: bool>(
         let fresnel = &mut lanes.fresnel[c][..n];
         if TANGENTS {
             lanes.scale_slope[c].resize(n, F::zero());
-            let (a, b) = (&mut lanes.d_fresnel_a[c][..n], &mut lanes.d_fresnel_b[c][..n]);
+            let (a, b) = (
+                &mut lanes.d_fresnel_a[c][..n],
+                &mut lanes.d_fresnel_b[c][..n],
+            );
             let slope = &mut lanes.scale_slope[c][..n];
             for l in 0..n {
                 let (f, scale) = (fresnel[l], one + f0 * g[l]);
