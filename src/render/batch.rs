@@ -177,6 +177,52 @@ impl<F: LaneFloat> Geometry<F> {
         }
     }
 
+    /// Empty arrays with room for `records` records.
+    fn with_capacity(records: usize, indirect: bool) -> Self {
+        let lane = || Vec::with_capacity(records);
+        Geometry {
+            hx2: lane(),
+            hy2: lane(),
+            hz2: lane(),
+            ix2: lane(),
+            iy2: lane(),
+            iz: lane(),
+            ox2: lane(),
+            oy2: lane(),
+            oz: lane(),
+            cos_d: lane(),
+            mu_node: [(); 2].map(|_| Vec::with_capacity(records)),
+            mu_weight: [(); 2].map(|_| lane()),
+            weight: [(); 3].map(|_| lane()),
+            indirect: [(); 4].map(|_| if indirect { lane() } else { Vec::new() }),
+        }
+    }
+
+    /// Appends the records of `other` after this one's.
+    fn append(&mut self, other: &Geometry<F>) {
+        let pairs = [
+            (&mut self.hx2, &other.hx2),
+            (&mut self.hy2, &other.hy2),
+            (&mut self.hz2, &other.hz2),
+            (&mut self.ix2, &other.ix2),
+            (&mut self.iy2, &other.iy2),
+            (&mut self.iz, &other.iz),
+            (&mut self.ox2, &other.ox2),
+            (&mut self.oy2, &other.oy2),
+            (&mut self.oz, &other.oz),
+            (&mut self.cos_d, &other.cos_d),
+        ];
+        let arrays = self.mu_weight.iter_mut().zip(&other.mu_weight);
+        let arrays = arrays.chain(self.weight.iter_mut().zip(&other.weight));
+        let arrays = arrays.chain(self.indirect.iter_mut().zip(&other.indirect));
+        for (to, from) in pairs.into_iter().chain(arrays) {
+            to.extend_from_slice(from);
+        }
+        for (to, from) in self.mu_node.iter_mut().zip(&other.mu_node) {
+            to.extend_from_slice(from);
+        }
+    }
+
     /// The arrays of the records `r`: `[hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz]`.
     fn directions(&self, r: std::ops::Range<usize>) -> [&[F]; 9] {
         [
@@ -553,11 +599,39 @@ fn gather<F: LaneFloat>(
     pixels: &[usize],
     indirect: bool,
 ) -> (Vec<usize>, Vec<[f64; 3]>, Geometry<F>) {
-    let spp = records.samples_per_pixel;
+    // Chunks of pixels in parallel, joined in pixel order: the same arrays for any thread count.
+    let parts: Vec<(Vec<usize>, Vec<[f64; 3]>, Geometry<F>)> = pixels
+        .par_chunks(GATHER_CHUNK)
+        .map(|chunk| gather_chunk(records, chunk, indirect))
+        .collect();
+    let total = parts.iter().map(|(_, _, g)| g.hx2.len()).sum();
     let mut start = Vec::with_capacity(pixels.len() + 1);
-    let mut lambert_sums = Vec::with_capacity(pixels.len());
-    let mut geometry = Geometry::default();
+    let mut lambert = Vec::with_capacity(pixels.len());
+    let mut geometry = Geometry::with_capacity(total, indirect);
     start.push(0);
+    for (ends, sums, part) in &parts {
+        let offset = geometry.hx2.len();
+        start.extend(ends.iter().map(|e| e + offset));
+        lambert.extend_from_slice(sums);
+        geometry.append(part);
+    }
+    (start, lambert, geometry)
+}
+
+/// Pixels per parallel task of [`gather`].
+const GATHER_CHUNK: usize = 4096;
+
+/// [`gather`] of one chunk of pixels: the end of each pixel's records (from 0), each pixel's
+/// white Lambertian radiance, and the records.
+fn gather_chunk<F: LaneFloat>(
+    records: &ShadingRecords,
+    pixels: &[usize],
+    indirect: bool,
+) -> (Vec<usize>, Vec<[f64; 3]>, Geometry<F>) {
+    let spp = records.samples_per_pixel;
+    let mut ends = Vec::with_capacity(pixels.len());
+    let mut lambert_sums = Vec::with_capacity(pixels.len());
+    let mut geometry = Geometry::with_capacity(pixels.len() * spp, indirect);
     let norm = 1.0 / spp as f64;
     for &p in pixels {
         let mut lambert = [0.0; 3];
@@ -579,9 +653,9 @@ fn gather<F: LaneFloat>(
             geometry.push(wi, wo, h, e.map(|e| e * norm), indirect);
         }
         lambert_sums.push(lambert.map(|v| v * norm));
-        start.push(geometry.hx2.len());
+        ends.push(geometry.hx2.len());
     }
-    (start, lambert_sums, geometry)
+    (ends, lambert_sums, geometry)
 }
 
 /// [`Lanes`] for the records in `range`, in the widest SIMD instruction set the CPU has
