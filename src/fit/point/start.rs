@@ -237,7 +237,8 @@ pub fn projected_start(projection: &Projection) -> Result<Vec<f64>, ArgminError>
         .min_by(|&a, &b| scan[a].total_cmp(&scan[b]))
         .expect("the scan has points");
     let roughness = if dim == 1 {
-        // Each of the two lowest basins of the scan is searched: with F0 solved at every
+        // The two lowest basins of the scan are searched (the second only when it competes,
+        // [`SECOND_BASIN_LOSS_RATIO`]): with F0 solved at every
         // node a flash set can hold a rough basin within a few percent of the true one
         // (`tabulated` on heitz photos of copper at alpha 0.5: 0.0304 at alpha 2.38 against
         // 0.0296 near 0.5), and the nodes beside the truth, 1.8x off it, lost to the rough one.
