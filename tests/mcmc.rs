@@ -367,7 +367,7 @@ fn nine_photo_capture(exposures: &[f64; 9]) -> String {
 fn per_photo_exposure_errors_widen_intervals_to_the_jackknife_spread() {
     // Photos rendered at exposure 1, fitted under manifest exposures off by 3% (seeded normal
     // factors): an error shared by each photo's pixels, which the likelihood alone reads as
-    // signal. The photo-clustered adjustment must widen F0's interval to the spread that the
+    // signal. The default adjustment must widen F0's interval to the spread that the
     // delete-one-photo jackknife of the point fit measures (Efron & Stein 1981: the jackknife
     // variance (n - 1)/n sum (t_i - t_mean)^2), an estimator of the same variance by refits
     // instead of scores; `--model-error none` must stay far narrower.

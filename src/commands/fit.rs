@@ -250,9 +250,10 @@ pub struct McmcArgs {
     /// Noise level of the likelihood in loss units (default: estimated from the best MAP loss).
     #[arg(long)]
     pub noise_sigma: Option<f64>,
-    /// How intervals account for model error: `photos` widens the posterior to the spread of
-    /// the photos' own evidence (photo-clustered sandwich), `none` trusts the model exactly.
-    #[arg(long, value_enum, default_value_t = ModelError::Photos)]
+    /// How intervals account for model error: `discrepancy` (the default) widens the posterior
+    /// to the spread of the photos' own evidence and to a discrepancy term fitted to the
+    /// residuals, `photos` to the photos' spread alone, `none` trusts the model exactly.
+    #[arg(long, value_enum, default_value_t = ModelError::Discrepancy)]
     pub model_error: ModelError,
     /// Checkpoint file (default: the output path with extension `.mcmc-checkpoint.json`).
     #[arg(long)]

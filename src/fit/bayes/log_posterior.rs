@@ -310,6 +310,32 @@ impl<'a> LogPosterior<'a> {
             .collect()
     }
 
+    /// Per loss pixel and channel: the precision `lambda` of its residual, with
+    /// `ln L = -1/2 sum lambda (p - t)^2 + const` near predictions `predicted` (the objective's
+    /// loss pixels); `None` for the Laplace reading, which is not a quadratic form.
+    pub fn residual_precisions(&self, predicted: &[[f64; 3]]) -> Option<Vec<[f64; 3]>> {
+        let s2 = self.noise.sigma * self.noise.sigma;
+        if let Some(data) = &self.proportional {
+            return Some(
+                predicted
+                    .iter()
+                    .zip(&data.weight)
+                    .map(|(p, w)| p.map(|p| w / (s2 * (p * p + data.floor_squared))))
+                    .collect(),
+            );
+        }
+        if self.noise.reading != Reading::Gaussian {
+            return None;
+        }
+        let weights = self.objective.image_loss().quadratic_weights()?;
+        Some(
+            weights
+                .into_iter()
+                .map(|v| v.map(|v| self.count * v / s2))
+                .collect(),
+        )
+    }
+
     /// Gradient of `ln L` (without the adjustment) at `x`.
     pub fn likelihood_gradient(&self, x: &[f64]) -> Vec<f64> {
         if self.proportional.is_some() {

@@ -32,7 +32,9 @@ use super::exposure::with_interval;
 use super::laplace::Laplace;
 use super::log_posterior::{self, LogPosterior, Noise, Reading};
 use super::model_error::{self, Adjustment, ModelError};
-use super::posterior::{candidate_label, summarise, ModelErrorSummary, Posterior, RunFacts};
+use super::posterior::{
+    candidate_label, summarise, DiscrepancyScales, ModelErrorSummary, Posterior, RunFacts,
+};
 use super::sampler::{self, Candidate, ChainState, Schedule, Target};
 use crate::error::{Error, Result};
 use crate::fit::point::params::ParamSpace;
@@ -248,10 +250,13 @@ fn prepare(
         .collect();
     let adjustments: Vec<Option<Adjustment>> = match options.model_error {
         ModelError::None => vec![None; candidates.len()],
-        ModelError::Photos => candidates
+        ModelError::Photos | ModelError::Discrepancy => candidates
             .iter()
             .zip(&laplace)
-            .map(|(&space, l)| model_error::photo_clustered(&target(space, None), l))
+            .map(|(&space, l)| {
+                let discrepancy = options.model_error == ModelError::Discrepancy;
+                model_error::photo_clustered(&target(space, None), l, discrepancy)
+            })
             .collect(),
     };
     for ((l, &space), adjustment) in laplace.iter_mut().zip(candidates).zip(&adjustments) {
@@ -384,9 +389,15 @@ pub fn sample_posterior(
                     Some((
                         candidate_label(candidates, index),
                         ModelErrorSummary {
-                            method: model_error::METHOD.to_string(),
+                            method: a.method().to_string(),
                             photos: a.photos,
                             widening: space.names().into_iter().zip(a.widening.clone()).collect(),
+                            discrepancy: a.discrepancy.map(|[likely, rms]| DiscrepancyScales {
+                                photo: likely[0],
+                                lobe: likely[1],
+                                photo_rms: rms[0],
+                                lobe_rms: rms[1],
+                            }),
                         },
                     ))
                 })

@@ -1,6 +1,7 @@
 //! Bayesian inference over the point estimates' parameter spaces.
 
 pub mod diagnostics;
+pub mod discrepancy;
 pub mod exposure;
 pub mod holdout;
 pub mod laplace;

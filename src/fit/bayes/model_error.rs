@@ -29,8 +29,14 @@
 //! estimate (rank at most `P - 1`), and reading its small directions as extra certainty would
 //! narrow intervals on exactly the evidence that cannot support it.
 //!
-//! Measured by simulation (`scripts/interval-coverage.sh`, docs/reference.md): see there for the
-//! coverage with and without the adjustment.
+//! Clusters only see a model error on which photos or regions disagree. One that every photo
+//! shares (another NDF tail, a pixel filter) leaves structure in the residuals instead; with
+//! `--model-error discrepancy` (the default) the covariance is also at least the one that a
+//! discrepancy term fitted to those residuals implies ([`super::discrepancy`]), composed as
+//! the block clusters are.
+//!
+//! Measured by simulation (`scripts/interval-coverage.sh`, docs/intervals.md): see there for the
+//! coverage of each method.
 
 use super::laplace::Laplace;
 use super::log_posterior::{central_differences, LogPosterior, FD_STEP};
@@ -42,14 +48,20 @@ use std::collections::BTreeMap;
 /// one and its one direction is the difference of two photos.
 pub const MIN_PHOTOS: usize = 3;
 
-/// Name of the method in the posterior object.
-pub const METHOD: &str = "photo-clustered sandwich (Chandler & Bate 2007)";
+/// Name of the method in the posterior object, without and with the discrepancy term.
+const METHOD: [&str; 2] = [
+    "photo-clustered sandwich (Chandler & Bate 2007)",
+    "photo-clustered sandwich (Chandler & Bate 2007) and fitted discrepancy (Kennedy & O'Hagan 2001)",
+];
 
 /// How `fit --mcmc` accounts for model error (`--model-error`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum ModelError {
-    /// The photo-clustered curvature adjustment (the default).
+    /// The photo-clustered adjustment widened further by a fitted discrepancy term
+    /// ([`super::discrepancy`]): the default.
+    Discrepancy,
+    /// The photo-clustered curvature adjustment alone.
     Photos,
     /// None: intervals assume the model is exact and pixel noise independent.
     None,
@@ -65,11 +77,19 @@ pub struct Adjustment {
     pub widening: Vec<f64>,
     /// Photos whose scores entered `J`.
     pub photos: usize,
+    /// The fitted discrepancy's prior scales (per-photo offset, lobe-shape coefficient): most
+    /// likely, then root-mean-square under their posterior; when the term was used.
+    pub discrepancy: Option<[[f64; 2]; 2]>,
 }
 
 impl Adjustment {
     fn dim(&self) -> usize {
         self.mode.len()
+    }
+
+    /// Name of the method that made this adjustment.
+    pub fn method(&self) -> &'static str {
+        METHOD[usize::from(self.discrepancy.is_some())]
     }
 
     /// `mode + C (x - mode)`: where the unadjusted likelihood is read.
@@ -142,7 +162,14 @@ fn spectral(m: &DMatrix<f64>, f: impl Fn(f64) -> f64) -> DMatrix<f64> {
 /// which photos of one geometry share and so do not disagree on). The adjusted covariance is
 /// at least each of the two: `A = floor(M_photos)`, then
 /// `M' = A^1/2 floor(A^-1/2 M_blocks A^-1/2) A^1/2`, in the whitened coordinates.
-pub fn photo_clustered(target: &LogPosterior, laplace: &Laplace) -> Option<Adjustment> {
+///
+/// With `discrepancy`, the covariance is also at least the one of the fitted discrepancy term
+/// ([`super::discrepancy`]), composed the same way.
+pub fn photo_clustered(
+    target: &LogPosterior,
+    laplace: &Laplace,
+    discrepancy: bool,
+) -> Option<Adjustment> {
     let mode = &laplace.mean;
     let d = mode.len();
     let layout = target.objective.layout();
@@ -172,12 +199,17 @@ pub fn photo_clustered(target: &LogPosterior, laplace: &Laplace) -> Option<Adjus
     {
         return None;
     }
-    let floor = |l: f64| l.max(1.0);
-    let a = spectral(&by_photo, floor);
-    let a_root = spectral(&a, f64::sqrt);
-    let a_inverse_root = spectral(&a, |l| 1.0 / l.sqrt());
-    let within = spectral(&(&a_inverse_root * by_block * &a_inverse_root), floor);
-    let adjusted = &a_root * within * &a_root;
+    let mut adjusted = at_least_both(&DMatrix::identity(d, d), &by_photo);
+    adjusted = at_least_both(&adjusted, &by_block);
+    let term = discrepancy
+        .then(|| super::discrepancy::at_mode(target, mode))
+        .flatten();
+    if let Some(term) = &term {
+        // R^T V R: the added covariance in the coordinates whitened by the model's curvature.
+        let r = DMatrix::from_row_slice(d, d, &laplace.precision.lower);
+        let whitened = DMatrix::identity(d, d) + r.transpose() * &term.added_covariance * r;
+        adjusted = at_least_both(&adjusted, &whitened);
+    }
     let inverse_root = spectral(&adjusted, |l| 1.0 / l.sqrt());
     let root = spectral(&adjusted, f64::sqrt);
     // Columns of C = R^-T S R^T e_j.
@@ -205,7 +237,17 @@ pub fn photo_clustered(target: &LogPosterior, laplace: &Laplace) -> Option<Adjus
         matrix,
         widening,
         photos: photo_count,
+        discrepancy: term.map(|t| [t.most_likely, t.root_mean_square]),
     })
+}
+
+/// In whitened coordinates, a covariance at least `a` (itself at least the identity) and at
+/// least `b`: `a^1/2 floor(a^-1/2 b a^-1/2) a^1/2`, eigenvalues floored at 1.
+fn at_least_both(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let root = spectral(a, f64::sqrt);
+    let inverse_root = spectral(a, |l| 1.0 / l.sqrt());
+    let within = spectral(&(&inverse_root * b * &inverse_root), |l| l.max(1.0));
+    &root * within * &root
 }
 
 /// Sums of `scores` over the clusters named by `keys` (one per score), in key order.
@@ -290,6 +332,7 @@ mod tests {
             matrix: vec![2.0, 0.3, -0.1, 0.0, 1.5, 0.7, -0.4, 0.2, 3.0],
             widening: vec![1.0; 3],
             photos: 9,
+            discrepancy: None,
         };
         let v = [0.3, -0.8, 1.1];
         let g = [1.7, 0.4, -0.6];

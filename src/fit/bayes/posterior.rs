@@ -18,7 +18,7 @@
 //! | `per_model` | probability, draws and parameter summary within each candidate (no diagnostics: the draws of one model are not a Markov chain) |
 //! | `acceptance` | within-model (MALA) and between-model acceptance rates after warm-up |
 //! | `noise` | the likelihood's reading, noise level and whether it was estimated |
-//! | `model_error` | per candidate (labels as in `per_model`): the model-error adjustment's method, the photos it compared and each coordinate's widening (adjusted over model-only standard deviation); absent with `--model-error none` ([`super::model_error`]) |
+//! | `model_error` | per candidate (labels as in `per_model`): the model-error adjustment's method, the photos it compared, each coordinate's widening (adjusted over model-only standard deviation) and, with `--model-error discrepancy`, the fitted discrepancy's most likely scales `discrepancy.photo` and `discrepancy.lobe` and their posterior root-mean-square `photo_rms`, `lobe_rms` ([`super::discrepancy`]); absent with `--model-error none` ([`super::model_error`]) |
 
 use super::diagnostics::{bulk_ess, split_rhat};
 use super::log_posterior::Noise;
@@ -111,6 +111,22 @@ pub struct ModelErrorSummary {
     /// Per coordinate of the parameter space (`ln_alpha`, `logit_f0_r`, ...): adjusted
     /// posterior standard deviation over the model's, at least 1.
     pub widening: BTreeMap<String, f64>,
+    /// The fitted discrepancy term's prior scales (`--model-error discrepancy`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub discrepancy: Option<DiscrepancyScales>,
+}
+
+/// Prior standard deviations of the fitted discrepancy term ([`super::discrepancy`]), as
+/// relative radiance: the most likely ones and their root-mean-square under their posterior
+/// (what the intervals were widened with).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiscrepancyScales {
+    /// Of one photo's offset (an exposure or light power error).
+    pub photo: f64,
+    /// Of one lobe-shape coefficient.
+    pub lobe: f64,
+    pub photo_rms: f64,
+    pub lobe_rms: f64,
 }
 
 /// Label of a candidate in `per_model`: the model name, `+diffuse` when diffuse is a choice.
