@@ -309,6 +309,12 @@ fn bad_mcmc_options_are_refused_without_output() {
         (vec!["--chains", "0"], "--chains"),
         (vec!["--mcmc-samples", "2"], "--mcmc-samples"),
         (vec!["--resume"], "checkpoint"),
+        (vec!["--discrepancy-floor", "2"], "--discrepancy-floor"),
+        (vec!["--discrepancy-floor", "nan"], "--discrepancy-floor"),
+        (
+            vec!["--discrepancy-floor", "0.01", "--model-error", "none"],
+            "--discrepancy-floor",
+        ),
     ] {
         let mut args = vec![
             "fit",

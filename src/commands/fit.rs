@@ -255,6 +255,11 @@ pub struct McmcArgs {
     /// residuals, `photos` to the photos' spread alone, `none` trusts the model exactly.
     #[arg(long, value_enum, default_value_t = ModelError::Discrepancy)]
     pub model_error: ModelError,
+    /// The least relative model error to assume, when you know it from outside the photos (for
+    /// example 0.01 for a renderer known to differ by about 1%): the discrepancy term's scales
+    /// (per-photo offset, lobe coefficient) are at least this. Default 1e-5.
+    #[arg(long)]
+    pub discrepancy_floor: Option<f64>,
     /// Checkpoint file (default: the output path with extension `.mcmc-checkpoint.json`).
     #[arg(long)]
     pub checkpoint: Option<PathBuf>,
@@ -313,6 +318,7 @@ impl FitOptionArgs {
             noise_sigma: mcmc.noise_sigma,
             pixels: mcmc.mcmc_pixels,
             model_error: mcmc.model_error,
+            discrepancy_floor: mcmc.discrepancy_floor,
             checkpoint: Some(checkpoint),
             resume: mcmc.resume,
             stop_after: mcmc.mcmc_stop_after,

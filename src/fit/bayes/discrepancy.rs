@@ -45,9 +45,13 @@ use nalgebra::{DMatrix, DVector};
 /// Lobe-shape basis functions: Legendre polynomials of degree 0 to `LOBE_TERMS - 1`.
 pub const LOBE_TERMS: usize = 6;
 
-/// Grid of each prior scale (relative radiance): log-spaced over [`SCALE_RANGE`] in
-/// [`SCALE_STEPS`] steps. Below 1e-5 a discrepancy is under 16-bit quantisation.
-const SCALE_RANGE: [f64; 2] = [1e-5, 1.0];
+/// Support of each scale's log-uniform prior (relative radiance), from a floor to
+/// [`LARGEST_SCALE`]: by default from [`SMALLEST_SCALE`], under 16-bit quantisation; a user who
+/// knows the model is no better than some level states it (`--discrepancy-floor`).
+pub const SMALLEST_SCALE: f64 = 1e-5;
+pub const LARGEST_SCALE: f64 = 1.0;
+
+/// Steps of the log-spaced grid over each scale's prior support.
 const SCALE_STEPS: usize = 100;
 
 /// The discrepancy term fitted at a mode.
@@ -181,7 +185,9 @@ fn log_marginal(g: &DMatrix<f64>, b: &DVector<f64>, prior: &[f64]) -> Option<f64
 
 /// The discrepancy term at `mode`, or `None` for a likelihood that is not a quadratic form
 /// of the residuals (`log-l1`) or when the information is singular.
-pub fn at_mode(target: &LogPosterior, mode: &[f64]) -> Option<Discrepancy> {
+///
+/// The scales' prior is log-uniform from `floor` to [`LARGEST_SCALE`].
+pub fn at_mode(target: &LogPosterior, mode: &[f64], floor: f64) -> Option<Discrepancy> {
     let d = mode.len();
     let predicted = target.objective.predict(mode);
     let precisions = target.residual_precisions(&predicted)?;
@@ -259,7 +265,7 @@ pub fn at_mode(target: &LogPosterior, mode: &[f64]) -> Option<Discrepancy> {
         }
     }
     g.fill_upper_triangle_with_lower_triangle();
-    let marginal = marginalise(&g, &b, d, photos.len())?;
+    let marginal = marginalise(&g, &b, d, photos.len(), floor)?;
     Some(Discrepancy {
         most_likely: marginal.most_likely,
         root_mean_square: marginal.root_mean_square,
@@ -283,12 +289,18 @@ const NEGLIGIBLE_WEIGHT: f64 = 1e-9;
 
 /// The discrepancy marginalised for the information `g` and score `b` over `d` coordinates, then
 /// `photos` photo offsets, then the lobe coefficients. The scales are not plugged in at their
-/// most likely values but averaged over their posterior on the grid, under a log-uniform prior on
-/// [`SCALE_RANGE`]: with a handful of visible coefficients a point estimate of a variance
+/// most likely values but averaged over their posterior on the grid, under a log-uniform prior
+/// from `floor` to [`LARGEST_SCALE`]: with a handful of visible coefficients a point estimate of a variance
 /// understates how large it may be (Gelman 2006, "Prior distributions for variance parameters in
 /// hierarchical models", Bayesian Analysis 1(3), section 5). The coordinates' covariance is that
 /// of the mixture: the mean of each grid point's covariance plus the spread of its means.
-fn marginalise(g: &DMatrix<f64>, b: &DVector<f64>, d: usize, photos: usize) -> Option<Marginal> {
+fn marginalise(
+    g: &DMatrix<f64>,
+    b: &DVector<f64>,
+    d: usize,
+    photos: usize,
+    floor: f64,
+) -> Option<Marginal> {
     let lobe = g.nrows() - d - photos;
     let prior = |photo_scale: f64, lobe_scale: f64| -> Vec<f64> {
         let mut p = vec![1.0 / (photo_scale * photo_scale); photos];
@@ -298,7 +310,7 @@ fn marginalise(g: &DMatrix<f64>, b: &DVector<f64>, d: usize, photos: usize) -> O
     let grid: Vec<f64> = (0..=SCALE_STEPS)
         .map(|k| {
             let f = k as f64 / SCALE_STEPS as f64;
-            SCALE_RANGE[0] * (SCALE_RANGE[1] / SCALE_RANGE[0]).powf(f)
+            floor * (LARGEST_SCALE / floor).powf(f)
         })
         .collect();
     let points: Vec<(f64, [f64; 2])> = grid
@@ -399,7 +411,9 @@ mod tests {
         let (mut photo, mut lobe) = (0.0, 0.0);
         for seed in 0..sets {
             let (g, b) = simulated(seed, photo_scale, lobe_scale, 1e-3);
-            let [p, l] = marginalise(&g, &b, 1, PHOTOS).unwrap().most_likely;
+            let [p, l] = marginalise(&g, &b, 1, PHOTOS, SMALLEST_SCALE)
+                .unwrap()
+                .most_likely;
             photo += (p / photo_scale).powi(2) / sets as f64;
             lobe += (l / lobe_scale).powi(2) / sets as f64;
         }
@@ -413,11 +427,25 @@ mod tests {
         // variance grows by E[tau_lobe^2] + E[tau_photo^2] / PHOTOS (the photos' contrasts are
         // seen, their mean is not), up to the noise's share and the spread of the means.
         let (g, b) = simulated(7, 0.01, 0.02, 1e-3);
-        let marginal = marginalise(&g, &b, 1, PHOTOS).unwrap();
+        let marginal = marginalise(&g, &b, 1, PHOTOS, SMALLEST_SCALE).unwrap();
         let [p, l] = marginal.root_mean_square;
         let expected = l * l + p * p / PHOTOS as f64;
         let added = marginal.added_covariance[(0, 0)];
         assert!((added / expected - 1.0).abs() < 0.05, "{added} {expected}");
+    }
+
+    #[test]
+    fn a_stated_floor_widens_even_photos_without_a_discrepancy() {
+        // Pure noise, but the user states that the model errs by at least 1% per function:
+        // the constant's variance grows by at least the floor's square (the lobe's degree-0
+        // term; the photo offsets' mean adds a ninth of it again).
+        let floor = 0.01;
+        let (g, b) = simulated(3, 0.0, 0.0, 1e-3);
+        let marginal = marginalise(&g, &b, 1, PHOTOS, floor).unwrap();
+        assert!(marginal.root_mean_square.iter().all(|&s| s >= floor));
+        let added = marginal.added_covariance[(0, 0)];
+        assert!(added >= floor * floor, "{added}");
+        assert!(added < 10.0 * floor * floor, "{added}");
     }
 
     #[test]
@@ -428,7 +456,9 @@ mod tests {
         let mut widening: Vec<f64> = (0..20)
             .map(|seed| {
                 let (g, b) = simulated(100 + seed, 0.0, 0.0, 1e-3);
-                let added = marginalise(&g, &b, 1, PHOTOS).unwrap().added_covariance;
+                let added = marginalise(&g, &b, 1, PHOTOS, SMALLEST_SCALE)
+                    .unwrap()
+                    .added_covariance;
                 let model = g
                     .view((0, 0), (1, 1))
                     .into_owned()

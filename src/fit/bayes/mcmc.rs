@@ -28,6 +28,7 @@
 //! different fingerprint is refused. Floats survive the JSON round trip exactly (serde_json's
 //! `float_roundtrip`).
 
+use super::discrepancy;
 use super::exposure::with_interval;
 use super::laplace::Laplace;
 use super::log_posterior::{self, LogPosterior, Noise, Reading};
@@ -66,6 +67,9 @@ pub struct McmcOptions {
     pub pixels: usize,
     /// How intervals account for model error ([`model_error`]).
     pub model_error: ModelError,
+    /// The least scale of the discrepancy term (`--discrepancy-floor`; default
+    /// [`discrepancy::SMALLEST_SCALE`]).
+    pub discrepancy_floor: Option<f64>,
     pub checkpoint: Option<PathBuf>,
     pub resume: bool,
     /// Stop (and checkpoint) after this many iterations per chain: for testing resumption.
@@ -124,7 +128,7 @@ fn fingerprint(
     }
     let map = &options.map;
     format!(
-        "{hash:016x} {candidates:?} {:?} {:?} {} {} {} {} {:?} {:?} {} {:?}",
+        "{hash:016x} {candidates:?} {:?} {:?} {} {} {} {} {:?} {:?} {} {:?} {:?}",
         map.loss,
         map.optimizer,
         map.max_iters,
@@ -134,7 +138,8 @@ fn fingerprint(
         options.schedule,
         options.noise_sigma,
         options.pixels,
-        options.model_error
+        options.model_error,
+        options.discrepancy_floor
     )
 }
 
@@ -163,6 +168,24 @@ fn validate(candidates: &[ParamSpace], options: &McmcOptions) -> Result<()> {
             return Err(Error::argument(
                 "--noise-sigma",
                 format!("must be a finite number > 0, got {s}"),
+            ));
+        }
+    }
+    if let Some(floor) = options.discrepancy_floor {
+        if options.model_error != ModelError::Discrepancy {
+            return Err(Error::argument(
+                "--discrepancy-floor",
+                "applies only with --model-error discrepancy",
+            ));
+        }
+        if !(discrepancy::SMALLEST_SCALE..discrepancy::LARGEST_SCALE).contains(&floor) {
+            return Err(Error::argument(
+                "--discrepancy-floor",
+                format!(
+                    "must be in [{}, {}), got {floor}",
+                    discrepancy::SMALLEST_SCALE,
+                    discrepancy::LARGEST_SCALE
+                ),
             ));
         }
     }
@@ -254,8 +277,12 @@ fn prepare(
             .iter()
             .zip(&laplace)
             .map(|(&space, l)| {
-                let discrepancy = options.model_error == ModelError::Discrepancy;
-                model_error::photo_clustered(&target(space, None), l, discrepancy)
+                let floor = (options.model_error == ModelError::Discrepancy).then(|| {
+                    options
+                        .discrepancy_floor
+                        .unwrap_or(discrepancy::SMALLEST_SCALE)
+                });
+                model_error::photo_clustered(&target(space, None), l, floor)
             })
             .collect(),
     };

@@ -163,12 +163,12 @@ fn spectral(m: &DMatrix<f64>, f: impl Fn(f64) -> f64) -> DMatrix<f64> {
 /// at least each of the two: `A = floor(M_photos)`, then
 /// `M' = A^1/2 floor(A^-1/2 M_blocks A^-1/2) A^1/2`, in the whitened coordinates.
 ///
-/// With `discrepancy`, the covariance is also at least the one of the fitted discrepancy term
-/// ([`super::discrepancy`]), composed the same way.
+/// With `discrepancy` (the least scale of the term), the covariance is also at least the one of
+/// the fitted discrepancy term ([`super::discrepancy`]), composed the same way.
 pub fn photo_clustered(
     target: &LogPosterior,
     laplace: &Laplace,
-    discrepancy: bool,
+    discrepancy: Option<f64>,
 ) -> Option<Adjustment> {
     let mode = &laplace.mean;
     let d = mode.len();
@@ -201,9 +201,7 @@ pub fn photo_clustered(
     }
     let mut adjusted = at_least_both(&DMatrix::identity(d, d), &by_photo);
     adjusted = at_least_both(&adjusted, &by_block);
-    let term = discrepancy
-        .then(|| super::discrepancy::at_mode(target, mode))
-        .flatten();
+    let term = discrepancy.and_then(|floor| super::discrepancy::at_mode(target, mode, floor));
     if let Some(term) = &term {
         // R^T V R: the added covariance in the coordinates whitened by the model's curvature.
         let r = DMatrix::from_row_slice(d, d, &laplace.precision.lower);
