@@ -12,7 +12,8 @@ copper-flash on even seeds, the pinhole point-light geometry of aluminium-pinhol
 the mismatch is applied, and the set is fitted with `fit --models single --mcmc` once per
 method: `--model-error discrepancy` (the default), `photos` (the photo-clustered adjustment
 alone) and `none` (the likelihood alone). The environment variables METHODS and MISMATCHES
-(comma-separated) run a subset; `none` is needed for the width column.
+(comma-separated) run a subset; `none` is needed for the width column. A method
+`discrepancy@S` passes `--discrepancy-floor S`.
 
 | mismatch | what differs between the photos and the fitted model |
 | --- | --- |
@@ -127,8 +128,10 @@ def make_set(folder, seed, mismatch):
 
 def fit(folder, method):
     out = folder / f"fit-{method}.json"
-    bouncefit("fit", folder / "photos", "--models", "single", "--mcmc", "--model-error", method,
-              "-o", out, "--force", "--quiet")
+    name, _, floor = method.partition("@")
+    extra = ["--discrepancy-floor", floor] if floor else []
+    bouncefit("fit", folder / "photos", "--models", "single", "--mcmc", "--model-error", name,
+              *extra, "-o", out, "--force", "--quiet")
     params = json.loads(out.read_text())["posterior"]["params"]
     return params["alpha"]["ci95"], params["f0"]["ci95"]
 
