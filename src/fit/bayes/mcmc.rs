@@ -271,19 +271,17 @@ fn prepare(
         .zip(&maps)
         .map(|(&space, map)| Laplace::at_mode(&target(space, None), &map.point(&space)))
         .collect();
+    let discrepancy_floor = (options.model_error == ModelError::Discrepancy).then(|| {
+        options
+            .discrepancy_floor
+            .unwrap_or(discrepancy::SMALLEST_SCALE)
+    });
     let adjustments: Vec<Option<Adjustment>> = match options.model_error {
         ModelError::None => vec![None; candidates.len()],
         ModelError::Photos | ModelError::Discrepancy => candidates
             .iter()
             .zip(&laplace)
-            .map(|(&space, l)| {
-                let floor = (options.model_error == ModelError::Discrepancy).then(|| {
-                    options
-                        .discrepancy_floor
-                        .unwrap_or(discrepancy::SMALLEST_SCALE)
-                });
-                model_error::photo_clustered(&target(space, None), l, floor)
-            })
+            .map(|(&space, l)| model_error::adjust(&target(space, None), l, discrepancy_floor))
             .collect(),
     };
     for ((l, &space), adjustment) in laplace.iter_mut().zip(candidates).zip(&adjustments) {

@@ -165,7 +165,7 @@ fn spectral(m: &DMatrix<f64>, f: impl Fn(f64) -> f64) -> DMatrix<f64> {
 ///
 /// With `discrepancy` (the least scale of the term), the covariance is also at least the one of
 /// the fitted discrepancy term ([`super::discrepancy`]), composed the same way.
-pub fn photo_clustered(
+pub fn adjust(
     target: &LogPosterior,
     laplace: &Laplace,
     discrepancy: Option<f64>,
