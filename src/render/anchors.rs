@@ -168,7 +168,9 @@ impl Anchors {
     }
 
     /// The stride for `pixels` of `records` (see the module table), or `None` when no
-    /// candidate stride meets `tolerance`.
+    /// candidate stride meets `tolerance`. The strides are tried largest first and the first
+    /// within the tolerance is taken, so the smaller grids are never built on a set where a
+    /// coarse one serves. The choice is remembered by content ([`remembered_stride`]).
     pub fn choose(
         records: &ShadingRecords,
         pixels: &[usize],
@@ -176,14 +178,16 @@ impl Anchors {
         height: Height,
         tolerance: f64,
     ) -> Option<Anchors> {
-        let errors = interpolation_errors(records, pixels, ndf, height);
-        CANDIDATE_STRIDES
-            .iter()
-            .zip(&errors)
-            .filter(|(_, &error)| error <= tolerance)
-            .map(|(&stride, _)| stride)
-            .next_back()
-            .map(|stride| Anchors::new(records, pixels, stride))
+        let key = fingerprint(records, pixels, ndf, height, tolerance);
+        let stride = remembered_stride(key, || {
+            let proxies = ProxyLobes::new(records, pixels, ndf, height);
+            CANDIDATE_STRIDES
+                .iter()
+                .rev()
+                .find(|&&stride| proxies.error(&Anchors::new(records, pixels, stride)) <= tolerance)
+                .copied()
+        });
+        stride.map(|stride| Anchors::new(records, pixels, stride))
     }
 }
 
@@ -229,76 +233,197 @@ pub fn reference_geometry(records: &ShadingRecords, pixel: usize) -> Option<([f6
         .map(|s| (records.wi[s], records.wo[s]))
 }
 
-/// Per candidate stride: the largest, over the proxy lobes and [`PROXY_ALPHAS`], RMS error of
-/// interpolating the lobe's radiance over the loss pixels, relative to the RMS radiance of
-/// single plus lobe (loss weights; channel 0, white Fresnel).
-pub fn interpolation_errors(
+/// Strides chosen so far, by [`fingerprint`] of what the choice reads: the objectives of one
+/// command often share their records (the rounds of a corrected fit, the models of `compare`,
+/// the sampler after the point fit), and each choice evaluates 14 proxy lobes at every loss
+/// pixel: 0.5 s of a `heitz` fit of copper-flash, four times over, before this memo. A few
+/// entries suffice; the oldest is dropped first.
+static CHOSEN_STRIDES: std::sync::Mutex<Vec<(u64, Option<usize>)>> =
+    std::sync::Mutex::new(Vec::new());
+const REMEMBERED_STRIDES: usize = 16;
+
+/// The stride remembered under `key`, or `choose()`'s, then remembered.
+fn remembered_stride(key: u64, choose: impl FnOnce() -> Option<usize>) -> Option<usize> {
+    let lookup = || {
+        let chosen = CHOSEN_STRIDES.lock().expect("no panic holds the lock");
+        chosen
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|&(_, stride)| stride)
+    };
+    if let Some(stride) = lookup() {
+        return stride;
+    }
+    let stride = choose();
+    let mut chosen = CHOSEN_STRIDES.lock().expect("no panic holds the lock");
+    if chosen.len() == REMEMBERED_STRIDES {
+        chosen.remove(0);
+    }
+    chosen.push((key, stride));
+    stride
+}
+
+/// A hash of everything [`Anchors::choose`] reads: the photos' layout, the loss pixels and
+/// their weights, every sub-sample's directions and irradiance, the NDF, the height model and
+/// the tolerance. Hashed in parallel chunks combined in order, so it does not depend on the
+/// thread count.
+pub(super) fn fingerprint(
     records: &ShadingRecords,
     pixels: &[usize],
     ndf: NdfKind,
     height: Height,
-) -> Vec<f64> {
-    let spp = records.samples_per_pixel as f64;
-    // Mean irradiance of each pixel: turns a BRDF value at the reference geometry into radiance.
-    let irradiance: Vec<f64> = pixels
-        .iter()
-        .map(|&p| {
-            let s = p * records.samples_per_pixel..(p + 1) * records.samples_per_pixel;
-            records.irradiance[s].iter().map(|e| e[0]).sum::<f64>() / spp
-        })
-        .collect();
-    let weight: Vec<f64> = pixels.iter().map(|&p| records.weight[p]).collect();
-    let grids: Vec<Anchors> = CANDIDATE_STRIDES
-        .iter()
-        .map(|&s| Anchors::new(records, pixels, s))
-        .collect();
-    let mut worst = vec![0.0f64; CANDIDATE_STRIDES.len()];
-    for proxy in [Model::KullaConty, Model::FastMsx] {
-        for alpha in PROXY_ALPHAS {
-            let single = SingleBounce {
-                microfacet: Microfacet::new(ndf, alpha, alpha),
-                fresnel: Fresnel::White,
-                height,
-            };
-            let lobe = differentiable::<f64>(proxy, single, BounceCap::NONE)
-                .expect("the proxies are analytic models");
-            let split = |wi: [f64; 3], wo: [f64; 3]| {
-                let mut unused = crate::albedo::rng_stream(0, 0);
-                let (s, m) = lobe.eval_split(Vec3::from_f64(wi), Vec3::from_f64(wo), &mut unused);
-                (s.0[0], m.0[0])
-            };
-            let exact: Vec<Option<(f64, f64)>> = pixels
-                .par_iter()
-                .with_min_len(TASK_PIXELS)
-                .map(|&p| reference_geometry(records, p).map(|(wi, wo)| split(wi, wo)))
-                .collect();
-            let mut norm = 0.0;
-            for (k, value) in exact.iter().enumerate() {
-                if let Some((s, m)) = value {
-                    norm += weight[k] * ((s + m) * irradiance[k]).powi(2);
-                }
-            }
-            if norm <= 0.0 {
-                continue;
-            }
-            for (error, anchors) in worst.iter_mut().zip(&grids) {
-                let values: Vec<Rgb<f64>> = anchors
-                    .points
-                    .par_iter()
-                    .map(|a| Rgb::splat(split(a.wi, a.wo).1))
-                    .collect();
-                let mut sum = 0.0;
-                for (k, corners) in anchors.corners.iter().enumerate() {
-                    if let (Some(corners), Some((_, m))) = (corners, exact[k]) {
-                        let interpolated = Anchors::interpolate(corners, &values).0[0];
-                        sum += weight[k] * ((interpolated - m) * irradiance[k]).powi(2);
-                    }
-                }
-                *error = error.max((sum / norm).sqrt());
+    tolerance: f64,
+) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let chunk_hash = |range: std::ops::Range<usize>| {
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        for s in range {
+            for v in records.wi[s]
+                .iter()
+                .chain(&records.wo[s])
+                .chain(&records.irradiance[s])
+            {
+                v.to_bits().hash(&mut h);
             }
         }
+        h.finish()
+    };
+    let samples = records.wi.len();
+    let chunk = TASK_PIXELS * records.samples_per_pixel.max(1);
+    let chunks: Vec<u64> = (0..samples.div_ceil(chunk))
+        .into_par_iter()
+        .map(|i| chunk_hash(i * chunk..((i + 1) * chunk).min(samples)))
+        .collect();
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    chunks.hash(&mut h);
+    pixels.hash(&mut h);
+    for &p in pixels {
+        records.weight[p].to_bits().hash(&mut h);
     }
-    worst
+    for span in &records.photos {
+        (span.first_pixel, span.width, span.height).hash(&mut h);
+    }
+    (records.samples_per_pixel, ndf, height, tolerance.to_bits()).hash(&mut h);
+    h.finish()
+}
+
+/// The proxy lobes of the module table at every roughness of [`PROXY_ALPHAS`], evaluated once
+/// at each loss pixel's reference geometry, against which any anchor grid's interpolation
+/// error is measured.
+pub struct ProxyLobes {
+    lobes: Vec<Box<dyn crate::bsdf::ScalarBrdf<f64>>>,
+    /// Per lobe: the multiple-bounce value at each loss pixel (0 where no sub-sample sees the
+    /// sample), and the weighted sum of squared radiance (single plus lobe) it is relative to.
+    multi: Vec<(Vec<f64>, f64)>,
+    /// Per loss pixel: weight times squared mean irradiance (0 where no sub-sample sees the
+    /// sample), turning a squared BRDF difference into a squared radiance error.
+    scale: Vec<f64>,
+}
+
+impl ProxyLobes {
+    pub fn new(records: &ShadingRecords, pixels: &[usize], ndf: NdfKind, height: Height) -> Self {
+        let spp = records.samples_per_pixel;
+        let geometry: Vec<Option<([f64; 3], [f64; 3])>> = pixels
+            .par_iter()
+            .with_min_len(TASK_PIXELS)
+            .map(|&p| reference_geometry(records, p))
+            .collect();
+        let scale: Vec<f64> = pixels
+            .iter()
+            .zip(&geometry)
+            .map(|(&p, g)| {
+                let e = records.irradiance[p * spp..(p + 1) * spp]
+                    .iter()
+                    .map(|e| e[0])
+                    .sum::<f64>()
+                    / spp as f64;
+                if g.is_some() {
+                    records.weight[p] * e * e
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let lobes: Vec<Box<dyn crate::bsdf::ScalarBrdf<f64>>> = [Model::KullaConty, Model::FastMsx]
+            .into_iter()
+            .flat_map(|proxy| {
+                PROXY_ALPHAS.map(|alpha| {
+                    let single = SingleBounce {
+                        microfacet: Microfacet::new(ndf, alpha, alpha),
+                        fresnel: Fresnel::White,
+                        height,
+                    };
+                    differentiable::<f64>(proxy, single, BounceCap::NONE)
+                        .expect("the proxies are analytic models")
+                })
+            })
+            .collect();
+        let multi = lobes
+            .iter()
+            .map(|lobe| {
+                let values: Vec<(f64, f64)> = geometry
+                    .par_iter()
+                    .with_min_len(TASK_PIXELS)
+                    .map(|g| g.map_or((0.0, 0.0), |(wi, wo)| split(lobe.as_ref(), wi, wo)))
+                    .collect();
+                let norm = values
+                    .iter()
+                    .zip(&scale)
+                    .map(|((s, m), w)| w * (s + m).powi(2))
+                    .sum::<f64>();
+                (values.into_iter().map(|(_, m)| m).collect(), norm)
+            })
+            .collect();
+        ProxyLobes {
+            lobes,
+            multi,
+            scale,
+        }
+    }
+
+    /// The largest, over the lobes, RMS error of interpolating the lobe's radiance from
+    /// `anchors` over the loss pixels, relative to the RMS radiance of single plus lobe (loss
+    /// weights; channel 0, white Fresnel). Pixels evaluated exactly add no error.
+    pub fn error(&self, anchors: &Anchors) -> f64 {
+        let mut worst = 0.0f64;
+        for (lobe, (multi, norm)) in self.lobes.iter().zip(&self.multi) {
+            if *norm <= 0.0 {
+                continue;
+            }
+            let values: Vec<Rgb<f64>> = anchors
+                .points
+                .par_iter()
+                .map(|a| Rgb::splat(split(lobe.as_ref(), a.wi, a.wo).1))
+                .collect();
+            // Fixed chunks summed in order: the same sum, so the same stride, on any number
+            // of threads.
+            let chunk_sums: Vec<f64> = anchors
+                .corners
+                .par_chunks(TASK_PIXELS)
+                .zip(multi.par_chunks(TASK_PIXELS))
+                .zip(self.scale.par_chunks(TASK_PIXELS))
+                .map(|((corners, multi), scale)| {
+                    let mut sum = 0.0;
+                    for ((corners, m), w) in corners.iter().zip(multi).zip(scale) {
+                        if let (Some(corners), true) = (corners, *w > 0.0) {
+                            sum += w * (Anchors::interpolate(corners, &values).0[0] - m).powi(2);
+                        }
+                    }
+                    sum
+                })
+                .collect();
+            let sum: f64 = chunk_sums.iter().sum();
+            worst = worst.max((sum / norm).sqrt());
+        }
+        worst
+    }
+}
+
+/// Single and multiple-bounce values of `lobe` at `(wi, wo)`, channel 0.
+fn split(lobe: &dyn crate::bsdf::ScalarBrdf<f64>, wi: [f64; 3], wo: [f64; 3]) -> (f64, f64) {
+    let mut unused = crate::albedo::rng_stream(0, 0);
+    let (s, m) = lobe.eval_split(Vec3::from_f64(wi), Vec3::from_f64(wo), &mut unused);
+    (s.0[0], m.0[0])
 }
 
 #[cfg(test)]

@@ -1,7 +1,7 @@
 //! The render plan against the exact render: each skip changes the prediction by no more than
 //! its stated bound, and does skip the work it claims to.
 
-use super::anchors::{interpolation_errors, CANDIDATE_STRIDES};
+use super::anchors::{fingerprint, Anchors, ProxyLobes, CANDIDATE_STRIDES};
 use super::plan::{
     MultiTerm, RenderPlan, Skip, Skips, BOUNCE_TOLERANCE, FAINT_TOLERANCE, SPARSE_TOLERANCE,
 };
@@ -64,7 +64,11 @@ const SPARSE_ONLY: Skips = Skips {
 fn the_stride_is_the_largest_within_the_tolerance() {
     let records = pinhole_records(48, 1, false);
     let pixels = lit_pixels(&records);
-    let errors = interpolation_errors(&records, &pixels, NdfKind::Ggx, Height::Correlated);
+    let proxies = ProxyLobes::new(&records, &pixels, NdfKind::Ggx, Height::Correlated);
+    let errors: Vec<f64> = CANDIDATE_STRIDES
+        .iter()
+        .map(|&s| proxies.error(&Anchors::new(&records, &pixels, s)))
+        .collect();
     assert!(errors[errors.len() - 1] > 4.0 * errors[0], "{errors:?}");
     let kc = material(Model::KullaConty, 0.3, FresnelSpec::White);
     let plan = RenderPlan::for_material(SPARSE_ONLY, &kc, &records, &pixels);
@@ -76,6 +80,49 @@ fn the_stride_is_the_largest_within_the_tolerance() {
             "stride {s}: error {e}, chose {stride}"
         );
     }
+}
+
+/// The chosen stride is remembered by the content the choice reads: records that differ only
+/// in their targets (the rounds of a corrected fit) share it; a change to any sub-sample's
+/// directions or irradiance, a pixel's weight, or the loss pixels is a new key.
+#[test]
+fn the_stride_memo_keys_on_what_the_choice_reads() {
+    let records = pinhole_records(24, 4, false);
+    let pixels = lit_pixels(&records);
+    let key = |r: &ShadingRecords, p: &[usize]| {
+        fingerprint(r, p, NdfKind::Ggx, Height::Correlated, SPARSE_TOLERANCE)
+    };
+    let base = key(&records, &pixels);
+    let mut retargeted = records.clone();
+    retargeted.target[pixels[0]][1] += 1.0;
+    assert_eq!(key(&retargeted, &pixels), base);
+    // The first sub-sample of the last lit pixel (sub-samples off the sample have no
+    // irradiance to change).
+    let last = pixels[pixels.len() - 1] * records.samples_per_pixel;
+    assert!(records.irradiance[last][2] > 0.0);
+    let changes: [(&str, Box<dyn Fn(&mut ShadingRecords)>); 4] = [
+        ("irradiance", Box::new(|r| r.irradiance[last][2] *= 0.5)),
+        ("wi", Box::new(|r| r.wi[last][0] += 1e-12)),
+        ("wo", Box::new(|r| r.wo[0][1] -= 1e-12)),
+        ("weight", Box::new(|r| r.weight[pixels[1]] *= 2.0)),
+    ];
+    for (what, change) in changes {
+        let mut changed = records.clone();
+        change(&mut changed);
+        assert_ne!(key(&changed, &pixels), base, "{what}");
+    }
+    assert_ne!(key(&records, &pixels[1..]), base, "pixels");
+    assert_ne!(
+        fingerprint(
+            &records,
+            &pixels,
+            NdfKind::Beckmann,
+            Height::Correlated,
+            SPARSE_TOLERANCE
+        ),
+        base,
+        "ndf"
+    );
 }
 
 /// Interpolating the analytic lobes changes the render by less than the tolerance (measured
