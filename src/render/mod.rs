@@ -288,6 +288,29 @@ pub fn render_material_streams(
     )
 }
 
+/// The multiple-bounce term alone of `material`, exact at every sub-sample (no plan), once per
+/// seed of `seeds`: what two models with the same single-bounce lobe differ by, without
+/// evaluating that lobe (the defect of `fit::point::corrected`). Each seed's render draws the
+/// same paths as [`render_material_streams`] under [`RenderPlan::exact`].
+pub fn render_multi_streams(
+    material: &Material,
+    records: &ShadingRecords,
+    pixels: &[usize],
+    seeds: &[u64],
+) -> Vec<Vec<[f64; 3]>> {
+    let brdf = material.capped_brdf(crate::bsdf::BounceCap::NONE);
+    let at = |s: usize| (Vec3::from_f64(records.wi[s]), Vec3::from_f64(records.wo[s]));
+    seeds
+        .iter()
+        .map(|&seed| {
+            accumulate(records, pixels, [0.0; 3], seed, |_, s, rng| {
+                let (wi, wo) = at(s);
+                brdf.eval_split(wi, wo, rng).1
+            })
+        })
+        .collect()
+}
+
 /// `f` at each distinct direction pair of `repeated`, from a stream of its own.
 fn shared_values<T: Real>(
     repeated: &repeated::Repeated,

@@ -125,6 +125,40 @@ fn the_stride_memo_keys_on_what_the_choice_reads() {
     );
 }
 
+/// The multiple-bounce render of a model is its exact render minus its single lobe's, path
+/// for path (the same streams), for stochastic and deterministic models.
+#[test]
+fn the_multiple_bounce_render_is_the_whole_minus_the_single_lobe() {
+    let records = pinhole_records(12, 4, false);
+    let pixels = lit_pixels(&records);
+    let seeds = [3, 4];
+    for model in [Model::Heitz, Model::Bitterli, Model::Tabulated] {
+        let m = material(model, 0.6, copper());
+        let whole = render_material_streams(&m, &records, &pixels, &RenderPlan::exact(), &seeds);
+        let single_lobe = Material {
+            model: Model::Single,
+            ..m.clone()
+        };
+        let single = render_material(&single_lobe, &records, &pixels, &RenderPlan::exact(), 0);
+        let multi = render_multi_streams(&m, &records, &pixels, &seeds);
+        let mut largest = 0.0f64;
+        for (whole, multi) in whole.iter().zip(&multi) {
+            for ((w, s), m) in whole.iter().zip(&single).zip(multi) {
+                for c in 0..3 {
+                    assert!(
+                        (w[c] - s[c] - m[c]).abs() <= 1e-12 * w[c].max(1e-300),
+                        "{model}: {} vs {}",
+                        w[c] - s[c],
+                        m[c]
+                    );
+                    largest = largest.max(m[c] / w[c].max(1e-300));
+                }
+            }
+        }
+        assert!(largest > 0.05, "{model}: the term is there ({largest})");
+    }
+}
+
 /// Interpolating the analytic lobes changes the render by less than the tolerance (measured
 /// on the same records); pixels next to the sample's edge, whose anchors miss it, are exact.
 #[test]

@@ -44,8 +44,7 @@ use crate::bsdf::{tabulated, Model};
 use crate::error::Result;
 use crate::loss::LossKind;
 use crate::material::Material;
-use crate::render::plan::RenderPlan;
-use crate::render::{render_material, render_material_streams};
+use crate::render::render_multi_streams;
 use crate::shading::ShadingRecords;
 use serde::{Deserialize, Serialize};
 
@@ -182,7 +181,9 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
 
 /// `S - T` at `pixels`: the stochastic `model`'s render at `fit`'s material, the mean over
 /// `seeds`, minus `tabulated`'s (the surrogate `fit` is of), both exact at every sub-sample and
-/// with `fit`'s exposure.
+/// with `fit`'s exposure. The two share the single-bounce lobe exactly (every stochastic model
+/// evaluates it in closed form and samples only the longer paths), so only their
+/// multiple-bounce terms are rendered.
 fn defect(
     fit: &ModelFit,
     model: Model,
@@ -191,13 +192,12 @@ fn defect(
     seeds: &[u64],
 ) -> Vec<[f64; 3]> {
     let exposed = fit.exposed(records);
-    let plan = RenderPlan::exact();
     let stochastic = Material {
         model,
         ..fit.material.clone()
     };
-    let renders = render_material_streams(&stochastic, &exposed, pixels, &plan, seeds);
-    let surrogate = render_material(&fit.material, &exposed, pixels, &plan, 0);
+    let renders = render_multi_streams(&stochastic, &exposed, pixels, seeds);
+    let surrogate = render_multi_streams(&fit.material, &exposed, pixels, &[0]).remove(0);
     let scale = 1.0 / seeds.len() as f64;
     surrogate
         .iter()
