@@ -21,7 +21,8 @@ CAPTURES = ["copper-flash", "aluminium-pinhole"]
 
 
 def binary():
-    """The release binary: $BOUNCEFIT_BIN (set by run.sh), else target/release/bouncefit."""
+    """The binary under test: $BOUNCEFIT_BIN (run.sh sets it to the test profile's build),
+    else target/release/bouncefit."""
     path = Path(os.environ.get("BOUNCEFIT_BIN", ROOT / "target" / "release" / "bouncefit"))
     if not path.is_file():
         pytest.fail(f"no bouncefit binary at {path}: run tests/crosscheck/run.sh")
