@@ -289,9 +289,10 @@ pub fn render_material_streams(
 }
 
 /// The multiple-bounce term alone of `material`, exact at every sub-sample (no plan), once per
-/// seed of `seeds`: what two models with the same single-bounce lobe differ by, without
-/// evaluating that lobe (the defect of `fit::point::corrected`). Each seed's render draws the
-/// same paths as [`render_material_streams`] under [`RenderPlan::exact`].
+/// seed of `seeds`: what two models with the same single-bounce lobe differ by, without that
+/// lobe's rounding (the defect of `fit::point::corrected`). The models still evaluate the lobe
+/// inside `eval`; only its value is left out. Each seed's render draws the same paths as
+/// [`render_material_streams`] under [`RenderPlan::exact`].
 pub fn render_multi_streams(
     material: &Material,
     records: &ShadingRecords,

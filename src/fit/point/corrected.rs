@@ -182,8 +182,8 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
 /// `S - T` at `pixels`: the stochastic `model`'s render at `fit`'s material, the mean over
 /// `seeds`, minus `tabulated`'s (the surrogate `fit` is of), both exact at every sub-sample and
 /// with `fit`'s exposure. The two share the single-bounce lobe exactly (every stochastic model
-/// evaluates it in closed form and samples only the longer paths), so only their
-/// multiple-bounce terms are rendered.
+/// evaluates it in closed form and samples only the longer paths), so the defect is the
+/// difference of their multiple-bounce terms, without the cancelled lobe's rounding.
 fn defect(
     fit: &ModelFit,
     model: Model,
