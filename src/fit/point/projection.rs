@@ -273,54 +273,89 @@ impl<'o, 'r> Projection<'o, 'r> {
         renders
     }
 
-    /// The moments of channel `c` over the loss pixels `pixels` (see [`Moments`]).
+    /// The moments of the three channels over the loss pixels `pixels` (see [`Moments`]), in
+    /// one pass over the renders. Per channel the sums run over the pixels in order, and
+    /// `aa`'s products are symmetric in `(j, l)` bit for bit, so its lower triangle is the
+    /// upper one's mirror. A single stream (deterministic models) is its own pair: its
+    /// coefficients are computed once, and `(a1 a2 + a2 a1) / 2` is `a1 a1` exactly.
     fn moments(
         &self,
-        c: usize,
         pixels: std::ops::Range<usize>,
         renders: &[Vec<Vec<[f64; 3]>>],
         target: &[[f64; 3]],
-    ) -> Moments {
+    ) -> [Moments; 3] {
+        /// One channel's sums in fixed-size arrays (the first `k` entries used).
+        #[derive(Default)]
+        struct Sums {
+            aa: [[f64; MAX_NODES]; MAX_NODES],
+            at: [f64; MAX_NODES],
+            ad: [f64; MAX_NODES],
+            tt: f64,
+            dd: f64,
+            dt: f64,
+        }
         let k = self.nodes.len();
         let streams = renders[0].len();
-        let mut m = Moments {
-            aa: vec![vec![0.0; k]; k],
-            at: vec![0.0; k],
-            ad: vec![0.0; k],
-            tt: 0.0,
-            dd: 0.0,
-            dt: 0.0,
-        };
+        let mut sums: [Sums; 3] = Default::default();
         for p in pixels {
-            let v = self.weights[p][c];
-            if v == 0.0 {
-                continue;
-            }
-            // Monomial coefficients of the stream's polynomial: the node values times the
-            // inverse Vandermonde matrix.
+            // Monomial coefficients of the stream's polynomial, per channel: the node values
+            // times the inverse Vandermonde matrix.
             let coefficients = |stream: usize| {
-                let mut a = [0.0; MAX_NODES];
+                let mut a = [[0.0; MAX_NODES]; 3];
                 for (lagrange, r) in self.lagrange.iter().zip(renders) {
-                    let y = r[stream][p][c];
-                    a.iter_mut().zip(lagrange).for_each(|(a, l)| *a += l * y);
+                    let y = r[stream][p];
+                    for (a, y) in a.iter_mut().zip(y) {
+                        a.iter_mut().zip(lagrange).for_each(|(a, l)| *a += l * y);
+                    }
                 }
                 a
             };
-            let (a1, a2) = (coefficients(0), coefficients(streams - 1));
-            let (t, d) = (target[p][c], self.diffuse.as_ref().map_or(0.0, |d| d[p][c]));
-            for j in 0..k {
-                let a = 0.5 * (a1[j] + a2[j]);
-                m.at[j] += v * a * t;
-                m.ad[j] += v * a * d;
-                for l in 0..k {
-                    m.aa[j][l] += v * 0.5 * (a1[j] * a2[l] + a2[j] * a1[l]);
+            let a1 = coefficients(0);
+            let a2 = (streams > 1).then(|| coefficients(streams - 1));
+            for (c, m) in sums.iter_mut().enumerate() {
+                let v = self.weights[p][c];
+                if v == 0.0 {
+                    continue;
                 }
+                let (t, d) = (target[p][c], self.diffuse.as_ref().map_or(0.0, |d| d[p][c]));
+                let a1 = &a1[c];
+                match &a2 {
+                    Some(a2) => {
+                        let a2 = &a2[c];
+                        for j in 0..k {
+                            let a = 0.5 * (a1[j] + a2[j]);
+                            m.at[j] += v * a * t;
+                            m.ad[j] += v * a * d;
+                            for l in j..k {
+                                m.aa[j][l] += v * 0.5 * (a1[j] * a2[l] + a2[j] * a1[l]);
+                            }
+                        }
+                    }
+                    None => {
+                        for j in 0..k {
+                            m.at[j] += v * a1[j] * t;
+                            m.ad[j] += v * a1[j] * d;
+                            for l in j..k {
+                                m.aa[j][l] += v * (a1[j] * a1[l]);
+                            }
+                        }
+                    }
+                }
+                m.tt += v * t * t;
+                m.dd += v * d * d;
+                m.dt += v * d * t;
             }
-            m.tt += v * t * t;
-            m.dd += v * d * d;
-            m.dt += v * d * t;
         }
-        m
+        sums.map(|m| Moments {
+            aa: (0..k)
+                .map(|j| (0..k).map(|l| m.aa[j.min(l)][j.max(l)]).collect())
+                .collect(),
+            at: m.at[..k].to_vec(),
+            ad: m.ad[..k].to_vec(),
+            tt: m.tt,
+            dd: m.dd,
+            dt: m.dt,
+        })
     }
 
     /// The loss minimised over F0 and diffuse at roughness coordinates `roughness`, and the
@@ -329,22 +364,26 @@ impl<'o, 'r> Projection<'o, 'r> {
         self.renders.fetch_add(self.nodes.len(), Ordering::Relaxed);
         let renders = self.node_renders(roughness);
         let target = self.objective.targets();
+        // Pixel chunks in parallel, their moments added in chunk order: the same sums for any
+        // thread count.
+        let moments = (0..self.weights.len())
+            .step_by(MOMENT_CHUNK)
+            .collect::<Vec<_>>()
+            .par_iter()
+            .map(|&start| {
+                let end = (start + MOMENT_CHUNK).min(self.weights.len());
+                self.moments(start..end, &renders, target)
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
+            .reduce(|a, b| {
+                let [a0, a1, a2] = a;
+                let [b0, b1, b2] = b;
+                [a0.add(b0), a1.add(b1), a2.add(b2)]
+            })
+            .expect("at least one pixel");
         let (mut f0, mut rho, mut loss) = ([0.0; 3], [0.0; 3], 0.0);
-        for c in 0..3 {
-            // Pixel chunks in parallel, their moments added in chunk order: the same sums for
-            // any thread count.
-            let m = (0..self.weights.len())
-                .step_by(MOMENT_CHUNK)
-                .collect::<Vec<_>>()
-                .par_iter()
-                .map(|&start| {
-                    let end = (start + MOMENT_CHUNK).min(self.weights.len());
-                    self.moments(c, start..end, &renders, target)
-                })
-                .collect::<Vec<_>>()
-                .into_iter()
-                .reduce(Moments::add)
-                .expect("at least one pixel");
+        for (c, m) in moments.iter().enumerate() {
             let (f, r, e) = m.minimise();
             (f0[c], rho[c], loss) = (f, r, loss + e);
         }
