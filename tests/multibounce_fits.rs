@@ -1,32 +1,65 @@
 //! Fits of photos rendered with the reference multi-bounce model `heitz` (issue "The fitter",
 //! How we will know): a multi-bounce fit recovers the truth, `single` cannot and leaves a larger
 //! loss. Metals: measured copper and gold (Johnson & Christy 1972 via
-//! ../shared/data/conductors_nk.json, at 650 / 550 / 450 nm for R / G / B).
+//! ../shared/data/conductors_nk.json, at 650 / 550 / 450 nm for R / G / B; the values are
+//! written out in [`metal`], so the fits do not need `../shared`).
 
 mod common;
 use common::*;
 use std::path::Path;
 
-/// (eta, k, F0) per channel of a metal in the shared table.
+/// (eta, k, F0) per channel of copper (`Cu`) or gold (`Au`), Johnson & Christy 1972 at 650,
+/// 550 and 450 nm as `../shared/data/conductors_nk.json` holds them (checked against it by
+/// [`the_metals_are_the_shared_table`]), so the fits run where `../shared` is absent.
 fn metal(symbol: &str) -> ([f64; 3], [f64; 3], [f64; 3]) {
-    let table = read_json(&repo("../shared/data/conductors_nk.json"));
-    let values = table["metals"][symbol]["primary"]["values"]
-        .as_array()
-        .unwrap();
-    let at = |nm: f64, key: &str| {
-        values
-            .iter()
-            .find(|v| v["wavelength_nm"].as_f64() == Some(nm))
-            .unwrap()[key]
-            .as_f64()
-            .unwrap()
-    };
-    let channels = |key: &str| [650.0, 550.0, 450.0].map(|nm| at(nm, key));
-    (
-        channels("n"),
-        channels("k"),
-        channels("normal_incidence_reflectance"),
-    )
+    match symbol {
+        "Cu" => (
+            [0.23779860499422903, 1.0066270015586398, 1.240441180172678],
+            [3.6264144295661427, 2.5823073079362238, 2.392941300328662],
+            [0.9352180977478067, 0.6235100886473987, 0.5382577162627749],
+        ),
+        "Au" => (
+            [0.15557377686501786, 0.42414932790070264, 1.3830881949423406],
+            [3.602444957445625, 2.472050472462367, 1.9155000123907862],
+            [0.9565222645090055, 0.7915532180129231, 0.4081937270148714],
+        ),
+        _ => panic!("no measured IOR for {symbol} in these tests"),
+    }
+}
+
+/// The metals above are the shared table's values (skipped, with a message, where
+/// `../shared` is absent).
+#[test]
+fn the_metals_are_the_shared_table() {
+    let path = repo("../shared/data/conductors_nk.json");
+    if !path.exists() {
+        eprintln!(
+            "skipped: no {} (it lives in ../shared, beside the project)",
+            path.display()
+        );
+        return;
+    }
+    let table = read_json(&path);
+    for symbol in ["Cu", "Au"] {
+        let values = table["metals"][symbol]["primary"]["values"]
+            .as_array()
+            .unwrap();
+        let at = |nm: f64, key: &str| {
+            values
+                .iter()
+                .find(|v| v["wavelength_nm"].as_f64() == Some(nm))
+                .unwrap()[key]
+                .as_f64()
+                .unwrap()
+        };
+        let channels = |key: &str| [650.0, 550.0, 450.0].map(|nm| at(nm, key));
+        let want = (
+            channels("n"),
+            channels("k"),
+            channels("normal_incidence_reflectance"),
+        );
+        assert_eq!(metal(symbol), want, "{symbol}");
+    }
 }
 
 /// A metal's conductor Fresnel as a material file's JSON and as a `--fresnel-known` value.
