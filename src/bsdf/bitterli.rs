@@ -400,15 +400,12 @@ impl<T: Real> Bitterli<T> {
         (sum, fell_back)
     }
 
-    /// `(single, multi)` of `f(wi, wo)`: the exact single bounce and the balance-heuristic
-    /// combination of the walks from `wi` and from `wo`; zero unless both directions are above
-    /// the surface.
-    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
-        let zero = Rgb::splat(T::zero());
+    /// The multiple-bounce part of `f(wi, wo)`: the balance-heuristic combination of the walks
+    /// from `wi` and from `wo`; zero unless both directions are above the surface.
+    fn multiple(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
         if wi.z.re64() <= 0.0 || wo.z.re64() <= 0.0 {
-            return (zero, zero);
+            return Rgb::splat(T::zero());
         }
-        let single = self.single.eval(wi, wo);
         let (forward, fb_f) = self.walk(wi, wo, rng);
         let (backward, fb_b) = self.walk(wo, wi, rng);
         self.count(2, fb_f as u64 + fb_b as u64);
@@ -420,13 +417,18 @@ impl<T: Real> Bitterli<T> {
                 T::zero()
             }
         });
-        (single, Rgb(multi))
+        Rgb(multi)
     }
 }
 
 impl<T: Real> ScalarBrdf<T> for Bitterli<T> {
+    /// The exact single bounce and [`Bitterli::multiple`].
     fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
-        Self::eval_split(self, wi, wo, rng)
+        (self.single.eval(wi, wo), self.multiple(wi, wo, rng))
+    }
+
+    fn eval_multi(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
+        self.multiple(wi, wo, rng)
     }
 }
 
@@ -527,6 +529,10 @@ impl Bitterli<f64> {
 impl Brdf for Bitterli<f64> {
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
         self.eval_split(wi, wo, rng).into()
+    }
+
+    fn eval_multi(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> [f64; 3] {
+        self.multiple(wi, wo, rng).0
     }
 
     fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {

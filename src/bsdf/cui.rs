@@ -213,11 +213,11 @@ impl<T: Real> Cui<T> {
         sum
     }
 
-    /// `(single, multi)` of `f(wi, wo)`; zero unless both directions are above the surface.
-    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
-        let zero = Rgb::splat(T::zero());
+    /// The multiple-bounce part of `f(wi, wo)`; zero unless both directions are above the
+    /// surface.
+    fn multiple(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
         if wi.z.re64() <= 0.0 || wo.z.re64() <= 0.0 {
-            return (zero, zero);
+            return Rgb::splat(T::zero());
         }
         let multi = self.walk(wi, wo, rng).map(|v| {
             let f = v / wo.z;
@@ -227,13 +227,18 @@ impl<T: Real> Cui<T> {
                 T::zero()
             }
         });
-        (self.single.eval(wi, wo), Rgb(multi))
+        Rgb(multi)
     }
 }
 
 impl<T: Real> ScalarBrdf<T> for Cui<T> {
+    /// The exact single bounce and [`Cui::multiple`].
     fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
-        Self::eval_split(self, wi, wo, rng)
+        (self.single.eval(wi, wo), self.multiple(wi, wo, rng))
+    }
+
+    fn eval_multi(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
+        self.multiple(wi, wo, rng)
     }
 }
 
@@ -288,6 +293,10 @@ impl Cui<f64> {
 impl Brdf for Cui<f64> {
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
         self.eval_split(wi, wo, rng).into()
+    }
+
+    fn eval_multi(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> [f64; 3] {
+        self.multiple(wi, wo, rng).0
     }
 
     fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {

@@ -102,6 +102,10 @@ impl<T: Real> ScalarBrdf<T> for FastMsx<T> {
     fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
         Self::eval_split(self, wi, wo)
     }
+
+    fn eval_multi(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
+        self.indirect(wi, wo)
+    }
 }
 
 impl AddedLobe for FastMsx<f64> {

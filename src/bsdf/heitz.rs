@@ -449,17 +449,20 @@ impl Heitz {
 
 impl Brdf for Heitz {
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue {
-        if wi.z <= 0.0 || wo.z <= 0.0 {
-            return BrdfValue::default();
+        BrdfValue {
+            single: SingleBounce::eval(&self.single(), wi, wo).0,
+            multi: self.eval_multi(wi, wo, rng),
         }
-        let single = SingleBounce::eval(&self.single(), wi, wo).0;
+    }
+
+    fn eval_multi(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> [f64; 3] {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return [0.0; 3];
+        }
         let last = self.cap.limit(u32::MAX);
         let forward = self.nee_walk(wi, wo, rng, (2, last), Weighting::Balance);
         let backward = self.nee_walk(wo, wi, rng, (2, last), Weighting::Balance);
-        BrdfValue {
-            single,
-            multi: [0, 1, 2].map(|c| forward[c] + backward[c]),
-        }
+        [0, 1, 2].map(|c| forward[c] + backward[c])
     }
 
     fn sample(&self, wi: Vec3<f64>, u: [f64; 2], rng: &mut Rng) -> Option<BrdfSample> {

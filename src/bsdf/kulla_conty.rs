@@ -100,6 +100,10 @@ impl<T: Real> ScalarBrdf<T> for KullaConty<T> {
     fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
         (self.single.eval(wi, wo), self.compensation(wi, wo))
     }
+
+    fn eval_multi(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
+        self.compensation(wi, wo)
+    }
 }
 
 impl AddedLobe for KullaConty<f64> {

@@ -72,6 +72,10 @@ impl<M: AddedLobe> Brdf for M {
         }
     }
 
+    fn eval_multi(&self, wi: Vec3<f64>, wo: Vec3<f64>, _rng: &mut Rng) -> [f64; 3] {
+        self.added_lobe(wi, wo)
+    }
+
     fn sample(&self, wi: Vec3<f64>, u: [f64; 2], _rng: &mut Rng) -> Option<BrdfSample> {
         sample(self.single_lobe(), wi, u, |wo| {
             let (s, m) = (self.single_lobe().eval(wi, wo).0, self.added_lobe(wi, wo));

@@ -120,6 +120,13 @@ pub trait Brdf: Send + Sync {
     /// models draw their random numbers from `rng`, analytic models ignore it.
     fn eval(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> BrdfValue;
 
+    /// The `multi` part of [`Brdf::eval`] alone, from the same random numbers: what the render
+    /// plan's anchors and a corrected fit's defect read. Models whose multiple-bounce term does
+    /// not need the single lobe's value skip computing it.
+    fn eval_multi(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> [f64; 3] {
+        self.eval(wi, wo, rng).multi
+    }
+
     /// Draw `wo` given `wi`. The first two uniform numbers come from `u` (so a caller can
     /// stratify or integrate over them), any further ones from `rng`. `None` when the sampled
     /// path leaves below the horizon or is absorbed.
@@ -160,6 +167,13 @@ pub trait ScalarBrdf<T: Real>: Send + Sync {
     /// different places, so the split must be the model's own, not a difference of totals.
     fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>);
 
+    /// The `multi` part of [`ScalarBrdf::eval_split`] alone, from the same random numbers
+    /// (see [`Brdf::eval_multi`]).
+    #[inline]
+    fn eval_multi(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
+        self.eval_split(wi, wo, rng).1
+    }
+
     /// `f(wi, wo)` in 1/sr, the single and multiple-bounce parts together.
     #[inline]
     fn eval_total(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
@@ -173,6 +187,11 @@ impl ScalarBrdf<f64> for dyn Brdf {
     fn eval_split(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> (Rgb<f64>, Rgb<f64>) {
         let value = self.eval(wi, wo, rng);
         (Rgb(value.single), Rgb(value.multi))
+    }
+
+    #[inline]
+    fn eval_multi(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> Rgb<f64> {
+        Rgb(Brdf::eval_multi(self, wi, wo, rng))
     }
 
     #[inline]

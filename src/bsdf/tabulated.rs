@@ -257,6 +257,10 @@ impl<T: Real> ScalarBrdf<T> for Tabulated<T> {
     fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
         (self.single.eval(wi, wo), self.multiple(wi, wo))
     }
+
+    fn eval_multi(&self, wi: Vec3<T>, wo: Vec3<T>, _rng: &mut Rng) -> Rgb<T> {
+        self.multiple(wi, wo)
+    }
 }
 
 impl AddedLobe for Tabulated<f64> {

@@ -441,3 +441,51 @@ fn capped_estimators_lose_exactly_the_tail() {
         }
     }
 }
+
+/// `eval_multi` is the `multi` part of `eval` (and of `eval_split`, for the models generic over
+/// the scalar) bit for bit, drawn from the same random numbers: the streams end in the same
+/// state. A model whose `eval_multi` skipped or reordered a draw, or left out part of its
+/// multiple-bounce term, fails; a direction below the surface is among the cases.
+#[test]
+fn the_multiple_bounce_term_alone_is_evals_from_the_same_draws() {
+    use super::testing::{ggx_material, random_configurations};
+    let mut cases = random_configurations(40, 7);
+    cases.push((0.5, unit(30.0, 0.0), Vec3::new(0.3, 0.0, -0.954)));
+    for model in Model::ALL {
+        let mut nonzero = 0;
+        for (k, &(alpha, wi, wo)) in cases.iter().enumerate() {
+            let material = ggx_material(model, alpha, COPPER);
+            let brdf = material.capped_brdf(BounceCap::NONE);
+            let (mut whole, mut alone) = (rng_stream(3, k as u64), rng_stream(3, k as u64));
+            let multi = brdf.eval(wi, wo, &mut whole).multi;
+            nonzero += usize::from(multi.iter().any(|&v| v > 0.0));
+            assert_eq!(
+                multi,
+                brdf.eval_multi(wi, wo, &mut alone),
+                "{model:?}, case {k}"
+            );
+            assert_eq!(
+                whole.random::<u64>(),
+                alone.random::<u64>(),
+                "{model:?}, case {k}"
+            );
+            if let Some(generic) = differentiable::<f64>(model, material.single(), BounceCap::NONE)
+            {
+                let (mut whole, mut alone) = (rng_stream(4, k as u64), rng_stream(4, k as u64));
+                let multi = generic.eval_split(wi, wo, &mut whole).1;
+                assert_eq!(
+                    multi.0,
+                    generic.eval_multi(wi, wo, &mut alone).0,
+                    "{model:?}"
+                );
+                assert_eq!(whole.random::<u64>(), alone.random::<u64>(), "{model:?}");
+            }
+        }
+        // The comparison is not of zeros: every model but `single` has a multiple-bounce term
+        // at many of these cases (one evaluation of `heitz`'s walks is 0 at 22 of the 41).
+        assert!(
+            model == Model::Single || nonzero > cases.len() / 4,
+            "{model:?}: {nonzero} nonzero"
+        );
+    }
+}

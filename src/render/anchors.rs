@@ -393,7 +393,11 @@ impl ProxyLobes {
             let values: Vec<Rgb<f64>> = anchors
                 .points
                 .par_iter()
-                .map(|a| Rgb::splat(split(lobe.as_ref(), a.wi, a.wo).1))
+                .map(|a| {
+                    let mut unused = crate::albedo::rng_stream(0, 0);
+                    let (wi, wo) = (Vec3::from_f64(a.wi), Vec3::from_f64(a.wo));
+                    Rgb::splat(lobe.eval_multi(wi, wo, &mut unused).0[0])
+                })
                 .collect();
             // Fixed chunks summed in order: the same sum, so the same stride, on any number
             // of threads.

@@ -246,7 +246,7 @@ pub fn anchor_values<T: Real, B: ScalarBrdf<T> + ?Sized>(
             let (wi, wo) = (Vec3::from_f64(a.wi), Vec3::from_f64(a.wo));
             let mut sum = Rgb::splat(T::zero());
             for _ in 0..draws {
-                sum = sum + brdf.eval_split(wi, wo, &mut rng).1;
+                sum = sum + brdf.eval_multi(wi, wo, &mut rng);
             }
             sum.scale(T::c(1.0 / draws as f64))
         })
@@ -290,8 +290,8 @@ pub fn render_material_streams(
 
 /// The multiple-bounce term alone of `material`, exact at every sub-sample (no plan), once per
 /// seed of `seeds`: what two models with the same single-bounce lobe differ by, without that
-/// lobe's rounding (the defect of `fit::point::corrected`). The models still evaluate the lobe
-/// inside `eval`; only its value is left out. Each seed's render draws the same paths as
+/// lobe's rounding (the defect of `fit::point::corrected`), and without evaluating it
+/// ([`crate::bsdf::Brdf::eval_multi`]). Each seed's render draws the same paths as
 /// [`render_material_streams`] under [`RenderPlan::exact`].
 pub fn render_multi_streams(
     material: &Material,
@@ -306,7 +306,7 @@ pub fn render_multi_streams(
         .map(|&seed| {
             accumulate(records, pixels, [0.0; 3], seed, |_, s, rng| {
                 let (wi, wo) = at(s);
-                brdf.eval_split(wi, wo, rng).1
+                Rgb(brdf.eval_multi(wi, wo, rng))
             })
         })
         .collect()

@@ -59,6 +59,10 @@ impl Brdf for Wang<f64> {
         self.eval_split(wi, wo, rng).into()
     }
 
+    fn eval_multi(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> [f64; 3] {
+        self.multiple(wi, wo, rng).0
+    }
+
     /// The analog random walk of sec. 4.3: reflect about a visible normal, then leave with the
     /// exit probability of the segment term (or continue; downward directions always continue).
     /// Its density is exactly the white `f cos`, so the weight is the product of the Fresnel

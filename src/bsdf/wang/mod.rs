@@ -234,23 +234,26 @@ impl<T: Real> Wang<T> {
         Some((next * len.recip(), self.surface.fresnel.eval(w.dot(h)), d4))
     }
 
-    /// `(single, multi)` of `f(wi, wo)`: the exact single bounce and the estimate of longer
-    /// paths; zero unless both directions are above the surface.
-    fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
-        let zero = Rgb::splat(T::zero());
+    /// The estimate of the paths longer than one bounce; zero unless both directions are above
+    /// the surface.
+    fn multiple(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
         if wi.z.re64() <= 0.0 || wo.z.re64() <= 0.0 {
-            return (zero, zero);
+            return Rgb::splat(T::zero());
         }
-        let multi = match self.estimator {
+        Rgb(match self.estimator {
             WangEstimator::PathTracing => self.multi_pt(wi, wo, rng),
             WangEstimator::Bidirectional => self.multi_bdpt(wi, wo, rng),
-        };
-        (self.surface.eval(wi, wo), Rgb(multi))
+        })
     }
 }
 
 impl<T: Real> ScalarBrdf<T> for Wang<T> {
+    /// The exact single bounce and [`Wang::multiple`].
     fn eval_split(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> (Rgb<T>, Rgb<T>) {
-        Self::eval_split(self, wi, wo, rng)
+        (self.surface.eval(wi, wo), self.multiple(wi, wo, rng))
+    }
+
+    fn eval_multi(&self, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
+        self.multiple(wi, wo, rng)
     }
 }
