@@ -344,15 +344,30 @@ impl ProxyLobes {
                 }
             })
             .collect();
+        let singles = PROXY_ALPHAS.map(|alpha| SingleBounce {
+            microfacet: Microfacet::new(ndf, alpha, alpha),
+            fresnel: Fresnel::White,
+            height,
+        });
+        // The two proxies at one roughness share their single lobe: evaluated once.
+        let single_values: Vec<Vec<f64>> = singles
+            .iter()
+            .map(|single| {
+                geometry
+                    .par_iter()
+                    .with_min_len(TASK_PIXELS)
+                    .map(|g| {
+                        g.map_or(0.0, |(wi, wo)| {
+                            single.eval(Vec3::from_f64(wi), Vec3::from_f64(wo)).0[0]
+                        })
+                    })
+                    .collect()
+            })
+            .collect();
         let lobes: Vec<Box<dyn crate::bsdf::ScalarBrdf<f64>>> = [Model::KullaConty, Model::FastMsx]
             .into_iter()
             .flat_map(|proxy| {
-                PROXY_ALPHAS.map(|alpha| {
-                    let single = SingleBounce {
-                        microfacet: Microfacet::new(ndf, alpha, alpha),
-                        fresnel: Fresnel::White,
-                        height,
-                    };
+                singles.map(|single| {
                     differentiable::<f64>(proxy, single, BounceCap::NONE)
                         .expect("the proxies are analytic models")
                 })
@@ -360,18 +375,20 @@ impl ProxyLobes {
             .collect();
         let multi = lobes
             .iter()
-            .map(|lobe| {
-                let values: Vec<(f64, f64)> = geometry
+            .zip(single_values.iter().cycle())
+            .map(|(lobe, single)| {
+                let values: Vec<f64> = geometry
                     .par_iter()
                     .with_min_len(TASK_PIXELS)
-                    .map(|g| g.map_or((0.0, 0.0), |(wi, wo)| split(lobe.as_ref(), wi, wo)))
+                    .map(|g| g.map_or(0.0, |(wi, wo)| multiple(lobe.as_ref(), wi, wo)))
                     .collect();
-                let norm = values
+                let norm = single
                     .iter()
+                    .zip(&values)
                     .zip(&scale)
                     .map(|((s, m), w)| w * (s + m).powi(2))
                     .sum::<f64>();
-                (values.into_iter().map(|(_, m)| m).collect(), norm)
+                (values, norm)
             })
             .collect();
         ProxyLobes {
@@ -393,11 +410,7 @@ impl ProxyLobes {
             let values: Vec<Rgb<f64>> = anchors
                 .points
                 .par_iter()
-                .map(|a| {
-                    let mut unused = crate::albedo::rng_stream(0, 0);
-                    let (wi, wo) = (Vec3::from_f64(a.wi), Vec3::from_f64(a.wo));
-                    Rgb::splat(lobe.eval_multi(wi, wo, &mut unused).0[0])
-                })
+                .map(|a| Rgb::splat(multiple(lobe.as_ref(), a.wi, a.wo)))
                 .collect();
             // Fixed chunks summed in order: the same sum, so the same stride, on any number
             // of threads.
@@ -423,11 +436,11 @@ impl ProxyLobes {
     }
 }
 
-/// Single and multiple-bounce values of `lobe` at `(wi, wo)`, channel 0.
-fn split(lobe: &dyn crate::bsdf::ScalarBrdf<f64>, wi: [f64; 3], wo: [f64; 3]) -> (f64, f64) {
+/// The multiple-bounce value of `lobe` at `(wi, wo)`, channel 0.
+fn multiple(lobe: &dyn crate::bsdf::ScalarBrdf<f64>, wi: [f64; 3], wo: [f64; 3]) -> f64 {
     let mut unused = crate::albedo::rng_stream(0, 0);
-    let (s, m) = lobe.eval_split(Vec3::from_f64(wi), Vec3::from_f64(wo), &mut unused);
-    (s.0[0], m.0[0])
+    lobe.eval_multi(Vec3::from_f64(wi), Vec3::from_f64(wo), &mut unused)
+        .0[0]
 }
 
 #[cfg(test)]
