@@ -375,6 +375,7 @@ impl ProxyLobes {
             .collect();
         let multi = lobes
             .iter()
+            // `lobes` runs over the roughness values once per proxy, as `single_values` does.
             .zip(single_values.iter().cycle())
             .map(|(lobe, single)| {
                 let values: Vec<f64> = geometry
