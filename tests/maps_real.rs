@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::{read_json, repo, run_ok};
+use common::{read_json, run_ok, shared};
 use image::{Rgb, RgbImage};
 use std::fs;
 use std::path::Path;
@@ -98,14 +98,9 @@ fn held_out(capture: &Path, depth: &str, out: &Path, extra: &[&str]) -> (f64, f6
 /// fit's left as it is) yellow_box's maps gave 0.163, which fails the 5%.
 #[test]
 fn maps_of_real_captures_predict_a_held_out_photo_better_than_a_uniform_material() {
-    let real = repo("../shared/data/real");
-    if !real.is_dir() {
-        eprintln!(
-            "skipped: no real captures at {} (they live in ../shared, beside the project)",
-            real.display()
-        );
+    let Some(real) = shared("data/real") else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     // (set, depth of its marker board in cm, largest held-out error as a share of the baseline)
     for (set, depth, of_baseline) in [

@@ -31,14 +31,9 @@ fn metal(symbol: &str) -> ([f64; 3], [f64; 3], [f64; 3]) {
 /// `../shared` is absent).
 #[test]
 fn the_metals_are_the_shared_table() {
-    let path = repo("../shared/data/conductors_nk.json");
-    if !path.exists() {
-        eprintln!(
-            "skipped: no {} (it lives in ../shared, beside the project)",
-            path.display()
-        );
+    let Some(path) = shared("data/conductors_nk.json") else {
         return;
-    }
+    };
     let table = read_json(&path);
     for symbol in ["Cu", "Au"] {
         let values = table["metals"][symbol]["primary"]["values"]

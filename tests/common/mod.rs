@@ -12,6 +12,20 @@ pub fn repo(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
 }
 
+/// `../shared/<path>`, beside the project (data with no licence to commit, read in place), or
+/// `None` with a message saying the test skipped where it is absent.
+pub fn shared(path: &str) -> Option<PathBuf> {
+    let full = repo(&format!("../shared/{path}"));
+    if full.exists() {
+        return Some(full);
+    }
+    eprintln!(
+        "skipped: no {} (it lives in ../shared, beside the project)",
+        full.display()
+    );
+    None
+}
+
 /// Run the binary, assert success, return stdout.
 pub fn run_ok(args: &[&str]) -> String {
     let out = bin().args(args).output().expect("binary runs");
