@@ -210,6 +210,16 @@ pub fn fit_point(records: &ShadingRecords, options: &FitOptions) -> Result<Point
 
 /// [`fit_point`] on the model's own objective: pyramid levels, then the full resolution.
 fn fit_point_direct(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
+    fit_point_on(&objective_of(records, options), records, options)
+}
+
+/// [`fit_point_direct`] with `objective` (`options`' objective over `records`) for the full
+/// resolution, so that a caller can fit it again (`corrected`).
+fn fit_point_on(
+    objective: &Objective,
+    records: &ShadingRecords,
+    options: &FitOptions,
+) -> Result<PointFit> {
     let started = Instant::now();
     let mut coarse: Vec<ShadingRecords> = Vec::new();
     while coarse.len() + 1 < options.pyramid.max(1) {
@@ -241,7 +251,7 @@ fn fit_point_direct(records: &ShadingRecords, options: &FitOptions) -> Result<Po
         start = Some(fit.point(&options.space));
     }
     let level_started = Instant::now();
-    let mut fit = fit_level(records, options, start, options.progress)?;
+    let mut fit = fit_level_on(objective, records, options, start, options.progress)?;
     if !levels.is_empty() {
         levels.push(LevelResult {
             resolution: [records.photos[0].width, records.photos[0].height],
@@ -265,8 +275,24 @@ fn fit_level(
     given_start: Option<Vec<f64>>,
     progress: bool,
 ) -> Result<ModelFit> {
+    fit_level_on(
+        &objective_of(records, options),
+        records,
+        options,
+        given_start,
+        progress,
+    )
+}
+
+/// [`fit_level`] on `objective`, `options`' objective over `records` (its targets may differ).
+fn fit_level_on(
+    objective: &Objective,
+    records: &ShadingRecords,
+    options: &FitOptions,
+    given_start: Option<Vec<f64>>,
+    progress: bool,
+) -> Result<ModelFit> {
     let space = options.space;
-    let objective = objective_of(records, options);
     // Stochastic models: the global start is searched on one render, the local searches use
     // the unbiased pair loss (see `Objective::single_render` and `crate::loss`). A
     // deterministic model's objective already renders once, and the start shares it with its
@@ -276,7 +302,7 @@ fn fit_level(
         single_render = objective_of(records, options).single_render();
         &single_render
     } else {
-        &objective
+        objective
     };
     if objective.pixel_count() == 0 {
         return Err(Error::argument(
@@ -321,7 +347,7 @@ fn fit_level(
     for (x, method) in starts {
         // The objective tracks the best point of each search (line-search probes included).
         *objective.best.lock().expect("no panics") = (f64::INFINITY, Vec::new());
-        let (i, termination) = local::search(&objective, local, x, options.max_iters, &recorder)
+        let (i, termination) = local::search(objective, local, x, options.max_iters, &recorder)
             .map_err(argmin_failed)?;
         let (cost, best_x) = objective.best.lock().expect("no panics").clone();
         results.push((cost, best_x, method, termination));
@@ -345,9 +371,9 @@ fn fit_level(
     results.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (_, best_x, _, termination) = results[0].clone();
     let material = space.material(&best_x);
-    let photos = photo_losses(&objective, records, &best_x);
+    let photos = photo_losses(objective, records, &best_x);
     let loss = objective.loss(&best_x);
-    let screened = if std::ptr::eq(screening, &objective) {
+    let screened = if std::ptr::eq(screening, objective) {
         0
     } else {
         screening

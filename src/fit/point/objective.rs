@@ -98,6 +98,24 @@ pub struct Objective<'a> {
     pub best: Mutex<(f64, Vec<f64>)>,
 }
 
+/// What the loss is divided by, so that optimiser tolerances are relative: for L2 the mean
+/// squared target, 1 for the other losses.
+fn loss_scale(kind: LossKind, target: &[[f64; 3]], weight: &[f64]) -> f64 {
+    match kind {
+        LossKind::L2 => {
+            let wsum: f64 = weight.iter().sum();
+            (target
+                .iter()
+                .zip(weight)
+                .map(|(t, w)| w * (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]) / 3.0)
+                .sum::<f64>()
+                / wsum)
+                .max(1e-300)
+        }
+        LossKind::RelativeL2 | LossKind::LogL1 | LossKind::Ssim => 1.0,
+    }
+}
+
 impl<'a> Objective<'a> {
     pub fn new(space: ParamSpace, records: &'a ShadingRecords, kind: LossKind, seed: u64) -> Self {
         let pixels: Vec<usize> = (0..records.pixel_count())
@@ -105,19 +123,7 @@ impl<'a> Objective<'a> {
             .collect();
         let target: Vec<[f64; 3]> = pixels.iter().map(|&p| records.target[p]).collect();
         let weight: Vec<f64> = pixels.iter().map(|&p| records.weight[p]).collect();
-        let scale = match kind {
-            LossKind::L2 => {
-                let wsum: f64 = weight.iter().sum();
-                (target
-                    .iter()
-                    .zip(&weight)
-                    .map(|(t, w)| w * (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]) / 3.0)
-                    .sum::<f64>()
-                    / wsum)
-                    .max(1e-300)
-            }
-            LossKind::RelativeL2 | LossKind::LogL1 | LossKind::Ssim => 1.0,
-        };
+        let scale = loss_scale(kind, &target, &weight);
         let layout = ImageLayout::new(records, &pixels);
         let stochastic = space
             .material(&vec![0.0; space.dim()])
@@ -143,6 +149,17 @@ impl<'a> Objective<'a> {
             evaluations: Arc::new(AtomicUsize::new(0)),
             best: Mutex::new((f64::INFINITY, Vec::new())),
         }
+    }
+
+    /// The same objective fitted to other targets (`target` indexed like
+    /// `ShadingRecords::target`), with its evaluation count restarted. The batch records and
+    /// the render plan depend on the records' geometry, not on their targets, so they are kept:
+    /// a defect-corrected fit's rounds (`corrected`) change only the targets, and building them
+    /// again cost each round more than its own search.
+    pub fn retarget(&mut self, target: &[[f64; 3]]) {
+        self.target = self.pixels.iter().map(|&p| target[p]).collect();
+        self.scale = loss_scale(self.kind, &self.target, &self.weight);
+        self.evaluations.store(0, Ordering::Relaxed);
     }
 
     /// The same objective on one render only: for a stochastic model its loss then includes
