@@ -141,45 +141,53 @@ struct Geometry<F> {
 }
 
 impl<F: LaneFloat> Geometry<F> {
-    /// Append one record: directions `wi`, `wo` (both above the surface), its half vector `h`
-    /// and its weight per channel, computed in `f64` and rounded once.
-    fn push(&mut self, wi: [f64; 3], wo: [f64; 3], h: [f64; 3], weight: [f64; 3], indirect: bool) {
-        let lanes = [
-            (&mut self.hx2, h[0] * h[0]),
-            (&mut self.hy2, h[1] * h[1]),
-            (&mut self.hz2, h[2] * h[2]),
-            (&mut self.ix2, wi[0] * wi[0]),
-            (&mut self.iy2, wi[1] * wi[1]),
-            (&mut self.iz, wi[2]),
-            (&mut self.ox2, wo[0] * wo[0]),
-            (&mut self.oy2, wo[1] * wo[1]),
-            (&mut self.oz, wo[2]),
-            (&mut self.cos_d, wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]),
+    /// One record's values, in the order of [`Geometry::real_lanes_mut`], from its directions
+    /// `wi`, `wo` (both above the surface), its half vector `h` and its weight per channel,
+    /// computed in `f64` (each is rounded once, when stored); and its two `mu` nodes. The last
+    /// four values are Fast-MSX's, computed only when `indirect`.
+    fn record_values(
+        wi: [f64; 3],
+        wo: [f64; 3],
+        h: [f64; 3],
+        weight: [f64; 3],
+        indirect: bool,
+    ) -> ([f64; REAL_LANES], [u32; 2]) {
+        let (node_i, weight_i) = AlbedoTable::mu_cell(wi[2]);
+        let (node_o, weight_o) = AlbedoTable::mu_cell(wo[2]);
+        let (m, scale) = if indirect {
+            indirect_geometry(Vec3::from_f64(wi), Vec3::from_f64(wo))
+                .unwrap_or(([0.0, 0.0, 1.0], 0.0))
+        } else {
+            ([0.0; 3], 0.0)
+        };
+        let values = [
+            h[0] * h[0],
+            h[1] * h[1],
+            h[2] * h[2],
+            wi[0] * wi[0],
+            wi[1] * wi[1],
+            wi[2],
+            wo[0] * wo[0],
+            wo[1] * wo[1],
+            wo[2],
+            wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2],
+            weight_i,
+            weight_o,
+            weight[0],
+            weight[1],
+            weight[2],
+            m[0] * m[0],
+            m[1] * m[1],
+            m[2] * m[2],
+            scale,
         ];
-        for (lane, value) in lanes {
-            lane.push(F::c(value));
-        }
-        for (side, mu) in [wi[2], wo[2]].into_iter().enumerate() {
-            let (node, weight) = AlbedoTable::mu_cell(mu);
-            self.mu_node[side].push(node as u32);
-            self.mu_weight[side].push(F::c(weight));
-        }
-        for (lane, w) in self.weight.iter_mut().zip(weight) {
-            lane.push(F::c(w));
-        }
-        if indirect {
-            let (m, scale) = indirect_geometry(Vec3::from_f64(wi), Vec3::from_f64(wo))
-                .unwrap_or(([0.0, 0.0, 1.0], 0.0));
-            let values = [m[0] * m[0], m[1] * m[1], m[2] * m[2], scale];
-            for (lane, value) in self.indirect.iter_mut().zip(values) {
-                lane.push(F::c(value));
-            }
-        }
+        (values, [node_i as u32, node_o as u32])
     }
 
-    /// Empty arrays with room for `records` records.
-    fn with_capacity(records: usize, indirect: bool) -> Self {
-        let lane = || Vec::with_capacity(records);
+    /// `records` records, every value 0 (the allocator's fresh zeroed pages, not yet touched,
+    /// so the threads that fill them fault their own pages in).
+    fn zeroed(records: usize, indirect: bool) -> Self {
+        let lane = || vec![F::c(0.0); records];
         Geometry {
             hx2: lane(),
             hy2: lane(),
@@ -191,36 +199,38 @@ impl<F: LaneFloat> Geometry<F> {
             oy2: lane(),
             oz: lane(),
             cos_d: lane(),
-            mu_node: [(); 2].map(|_| Vec::with_capacity(records)),
+            mu_node: [(); 2].map(|_| vec![0; records]),
             mu_weight: [(); 2].map(|_| lane()),
             weight: [(); 3].map(|_| lane()),
             indirect: [(); 4].map(|_| if indirect { lane() } else { Vec::new() }),
         }
     }
 
-    /// Appends the records of `other` after this one's.
-    fn append(&mut self, other: &Geometry<F>) {
-        let pairs = [
-            (&mut self.hx2, &other.hx2),
-            (&mut self.hy2, &other.hy2),
-            (&mut self.hz2, &other.hz2),
-            (&mut self.ix2, &other.ix2),
-            (&mut self.iy2, &other.iy2),
-            (&mut self.iz, &other.iz),
-            (&mut self.ox2, &other.ox2),
-            (&mut self.oy2, &other.oy2),
-            (&mut self.oz, &other.oz),
-            (&mut self.cos_d, &other.cos_d),
+    /// The real-valued arrays in the order of [`Geometry::record_values`] (Fast-MSX's four only
+    /// where they are stored), and the `mu` nodes.
+    fn lanes_mut(&mut self) -> (Vec<&mut [F]>, [&mut [u32]; 2]) {
+        let mut real: Vec<&mut [F]> = vec![
+            &mut self.hx2,
+            &mut self.hy2,
+            &mut self.hz2,
+            &mut self.ix2,
+            &mut self.iy2,
+            &mut self.iz,
+            &mut self.ox2,
+            &mut self.oy2,
+            &mut self.oz,
+            &mut self.cos_d,
         ];
-        let arrays = self.mu_weight.iter_mut().zip(&other.mu_weight);
-        let arrays = arrays.chain(self.weight.iter_mut().zip(&other.weight));
-        let arrays = arrays.chain(self.indirect.iter_mut().zip(&other.indirect));
-        for (to, from) in pairs.into_iter().chain(arrays) {
-            to.extend_from_slice(from);
-        }
-        for (to, from) in self.mu_node.iter_mut().zip(&other.mu_node) {
-            to.extend_from_slice(from);
-        }
+        real.extend(self.mu_weight.iter_mut().map(|v| v.as_mut_slice()));
+        real.extend(self.weight.iter_mut().map(|v| v.as_mut_slice()));
+        real.extend(
+            self.indirect
+                .iter_mut()
+                .filter(|v| !v.is_empty())
+                .map(|v| v.as_mut_slice()),
+        );
+        let [i, o] = &mut self.mu_node;
+        (real, [i, o])
     }
 
     /// The arrays of the records `r`: `[hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz]`.
@@ -593,27 +603,93 @@ impl BatchRecords {
     }
 }
 
-/// `(start, lambert, geometry)` of [`BatchRecords`] for the records of `pixels`.
+/// Real-valued arrays of a record: [`Geometry::record_values`].
+const REAL_LANES: usize = 19;
+
+/// `(start, lambert, geometry)` of [`BatchRecords`] for the records of `pixels`. Two parallel
+/// passes over chunks of pixels: the first counts each chunk's records, the second writes them
+/// straight into their place in the final arrays. Gathering each chunk into arrays of its own
+/// and joining them wrote every record twice, and the join ran on one thread: a fifth of a
+/// `single` fit's samples, most of it the kernel clearing fresh pages.
 fn gather<F: LaneFloat>(
     records: &ShadingRecords,
     pixels: &[usize],
     indirect: bool,
 ) -> (Vec<usize>, Vec<[f64; 3]>, Geometry<F>) {
-    // Chunks of pixels in parallel, joined in pixel order: the same arrays for any thread count.
-    let parts: Vec<(Vec<usize>, Vec<[f64; 3]>, Geometry<F>)> = pixels
-        .par_chunks(GATHER_CHUNK)
-        .map(|chunk| gather_chunk(records, chunk, indirect))
+    let chunks: Vec<&[usize]> = pixels.chunks(GATHER_CHUNK).collect();
+    let counts: Vec<usize> = chunks
+        .par_iter()
+        .map(|chunk| {
+            chunk
+                .iter()
+                .flat_map(|&p| sub_samples(records, p))
+                .filter(|&s| stored(records, s))
+                .count()
+        })
         .collect();
-    let total = parts.iter().map(|(_, _, g)| g.hx2.len()).sum();
+    let mut geometry = Geometry::<F>::zeroed(counts.iter().sum(), indirect);
+    let (real, [node_i, node_o]) = geometry.lanes_mut();
+    // Per chunk: its part of every array.
+    let mut real: Vec<std::vec::IntoIter<&mut [F]>> = real
+        .into_iter()
+        .map(|lane| split_by_counts(lane, &counts).into_iter())
+        .collect();
+    let mut nodes = [node_i, node_o].map(|lane| split_by_counts(lane, &counts).into_iter());
+    let parts: Vec<(Vec<&mut [F]>, [&mut [u32]; 2])> = counts
+        .iter()
+        .map(|_| {
+            let real = real
+                .iter_mut()
+                .map(|lane| lane.next().expect("a part per chunk"));
+            let [i, o] = &mut nodes;
+            let nodes = [i.next(), o.next()].map(|n| n.expect("a part per chunk"));
+            (real.collect(), nodes)
+        })
+        .collect();
+    let norm = 1.0 / records.samples_per_pixel as f64;
+    let filled: Vec<(Vec<usize>, Vec<[f64; 3]>)> = chunks
+        .into_par_iter()
+        .zip(parts)
+        .map(|(chunk, (mut real, [node_i, node_o]))| {
+            let mut ends = Vec::with_capacity(chunk.len());
+            let mut lambert_sums = Vec::with_capacity(chunk.len());
+            let mut k = 0;
+            for &p in chunk {
+                let mut lambert = [0.0; 3];
+                for s in sub_samples(records, p) {
+                    let e = records.irradiance[s];
+                    for c in 0..3 {
+                        lambert[c] += e[c] * FRAC_1_PI;
+                    }
+                    if !stored(records, s) {
+                        continue;
+                    }
+                    let (wi, wo) = (records.wi[s], records.wo[s]);
+                    let sum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
+                    let len = (sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]).sqrt();
+                    let h = sum.map(|v| v / len);
+                    let (values, [n_i, n_o]) =
+                        Geometry::<F>::record_values(wi, wo, h, e.map(|e| e * norm), indirect);
+                    for (lane, value) in real.iter_mut().zip(values) {
+                        lane[k] = F::c(value);
+                    }
+                    (node_i[k], node_o[k]) = (n_i, n_o);
+                    k += 1;
+                }
+                lambert_sums.push(lambert.map(|v| v * norm));
+                ends.push(k);
+            }
+            (ends, lambert_sums)
+        })
+        .collect();
     let mut start = Vec::with_capacity(pixels.len() + 1);
     let mut lambert = Vec::with_capacity(pixels.len());
-    let mut geometry = Geometry::with_capacity(total, indirect);
     start.push(0);
-    for (ends, sums, part) in &parts {
-        let offset = geometry.hx2.len();
+    let mut offset = 0;
+    for ((ends, sums), count) in filled.iter().zip(&counts) {
         start.extend(ends.iter().map(|e| e + offset));
         lambert.extend_from_slice(sums);
-        geometry.append(part);
+        offset += count;
     }
     (start, lambert, geometry)
 }
@@ -621,41 +697,28 @@ fn gather<F: LaneFloat>(
 /// Pixels per parallel task of [`gather`].
 const GATHER_CHUNK: usize = 4096;
 
-/// [`gather`] of one chunk of pixels: the end of each pixel's records (from 0), each pixel's
-/// white Lambertian radiance, and the records.
-fn gather_chunk<F: LaneFloat>(
-    records: &ShadingRecords,
-    pixels: &[usize],
-    indirect: bool,
-) -> (Vec<usize>, Vec<[f64; 3]>, Geometry<F>) {
+/// The sub-samples of pixel `p`.
+fn sub_samples(records: &ShadingRecords, p: usize) -> std::ops::Range<usize> {
     let spp = records.samples_per_pixel;
-    let mut ends = Vec::with_capacity(pixels.len());
-    let mut lambert_sums = Vec::with_capacity(pixels.len());
-    let mut geometry = Geometry::with_capacity(pixels.len() * spp, indirect);
-    let norm = 1.0 / spp as f64;
-    for &p in pixels {
-        let mut lambert = [0.0; 3];
-        for s in p * spp..(p + 1) * spp {
-            let e = records.irradiance[s];
-            if e == [0.0; 3] {
-                continue;
-            }
-            for c in 0..3 {
-                lambert[c] += e[c] * FRAC_1_PI;
-            }
-            let (wi, wo) = (records.wi[s], records.wo[s]);
-            if wi[2] <= 0.0 || wo[2] <= 0.0 {
-                continue;
-            }
-            let sum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
-            let len = (sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]).sqrt();
-            let h = sum.map(|v| v / len);
-            geometry.push(wi, wo, h, e.map(|e| e * norm), indirect);
-        }
-        lambert_sums.push(lambert.map(|v| v * norm));
-        ends.push(geometry.hx2.len());
-    }
-    (ends, lambert_sums, geometry)
+    p * spp..(p + 1) * spp
+}
+
+/// Whether sub-sample `s` is a record of the batch: lit, with both directions above the
+/// surface. Every sub-sample adds its irradiance to its pixel's Lambertian sum.
+fn stored(records: &ShadingRecords, s: usize) -> bool {
+    records.irradiance[s] != [0.0; 3] && records.wi[s][2] > 0.0 && records.wo[s][2] > 0.0
+}
+
+/// `slice` cut into consecutive parts of `counts` elements.
+fn split_by_counts<'a, T>(mut slice: &'a mut [T], counts: &[usize]) -> Vec<&'a mut [T]> {
+    counts
+        .iter()
+        .map(|&n| {
+            let (part, rest) = std::mem::take(&mut slice).split_at_mut(n);
+            slice = rest;
+            part
+        })
+        .collect()
 }
 
 /// [`Lanes`] for the records in `range`, in the widest SIMD instruction set the CPU has
