@@ -84,11 +84,18 @@ impl<T: Real> FastMsx<T> {
             Vec3::<f64>::from_f64(wi.re()),
             Vec3::<f64>::from_f64(wo.re()),
         );
-        let Some((m_i, scale)) = indirect_geometry(l, v) else {
+        let Some(geometry) = indirect_geometry(l, v) else {
             return zero;
         };
+        self.indirect_from(geometry, l.dot((l + v).normalize()))
+    }
+
+    /// [`FastMsx::indirect`] from its direction-only part, `indirect_geometry(l, v)` where it
+    /// is `Some`, and `wi.h`: for callers that read the lobe at several roughness values for
+    /// one pair of directions (the render plan's proxy lobes).
+    pub fn indirect_from(&self, (m_i, scale): ([f64; 3], f64), cos_d: f64) -> Rgb<T> {
         let d_i = self.single.microfacet.d(Vec3::from_f64(m_i));
-        let f = self.single.fresnel.eval(T::c(l.dot((l + v).normalize())));
+        let f = self.single.fresnel.eval(T::c(cos_d));
         (f * f).scale(d_i * T::c(scale))
     }
 

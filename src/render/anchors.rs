@@ -21,6 +21,7 @@
 //! objective stays a smooth function of the parameters.
 
 use super::TASK_PIXELS;
+use crate::bsdf::fast_msx::{self, FastMsx};
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::{differentiable, BounceCap, Model};
 use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
@@ -34,6 +35,10 @@ pub const CANDIDATE_STRIDES: [usize; 7] = [2, 3, 4, 6, 8, 12, 16];
 /// Roughness values at which the interpolation error is measured (the multiple-bounce lobe is
 /// negligible below 0.05 and the widest, so the easiest to interpolate, at the top).
 pub const PROXY_ALPHAS: [f64; 7] = [0.05, 0.1, 0.2, 0.35, 0.6, 1.0, 1.5];
+
+/// The two proxy lobes of the module table: their multiple-bounce terms at every roughness of
+/// [`PROXY_ALPHAS`] stand for every model's.
+const PROXY_MODELS: [Model; 2] = [Model::KullaConty, Model::FastMsx];
 
 /// One anchor: the pixel whose random stream it uses and the geometry it is evaluated at.
 #[derive(Clone, Copy, Debug)]
@@ -364,7 +369,7 @@ impl ProxyLobes {
                     .collect()
             })
             .collect();
-        let lobes: Vec<Box<dyn crate::bsdf::ScalarBrdf<f64>>> = [Model::KullaConty, Model::FastMsx]
+        let lobes: Vec<Box<dyn crate::bsdf::ScalarBrdf<f64>>> = PROXY_MODELS
             .into_iter()
             .flat_map(|proxy| {
                 singles.map(|single| {
@@ -373,16 +378,44 @@ impl ProxyLobes {
                 })
             })
             .collect();
+        // Fast-MSX's direction-only part and `wi.h` do not depend on the roughness: prepared
+        // once per pixel, not once per roughness (they were a third of the choice's samples).
+        let indirect: Vec<Option<(([f64; 3], f64), f64)>> = geometry
+            .par_iter()
+            .with_min_len(TASK_PIXELS)
+            .map(|g| {
+                let (wi, wo) = (*g)?;
+                if wi[2] <= 0.0 || wo[2] <= 0.0 {
+                    return None;
+                }
+                let (l, v) = (Vec3::from_f64(wi), Vec3::from_f64(wo));
+                let geometry = fast_msx::indirect_geometry(l, v)?;
+                Some((geometry, l.dot((l + v).normalize())))
+            })
+            .collect();
         let multi = lobes
             .iter()
+            .enumerate()
             // `lobes` runs over the roughness values once per proxy, as `single_values` does.
             .zip(single_values.iter().cycle())
-            .map(|(lobe, single)| {
-                let values: Vec<f64> = geometry
-                    .par_iter()
-                    .with_min_len(TASK_PIXELS)
-                    .map(|g| g.map_or(0.0, |(wi, wo)| multiple(lobe.as_ref(), wi, wo)))
-                    .collect();
+            .map(|((k, lobe), single)| {
+                let values: Vec<f64> = match PROXY_MODELS[k / singles.len()] {
+                    Model::FastMsx => {
+                        let lobe = FastMsx {
+                            single: singles[k % singles.len()],
+                        };
+                        indirect
+                            .par_iter()
+                            .with_min_len(TASK_PIXELS)
+                            .map(|g| g.map_or(0.0, |(m, cos_d)| lobe.indirect_from(m, cos_d).0[0]))
+                            .collect()
+                    }
+                    _ => geometry
+                        .par_iter()
+                        .with_min_len(TASK_PIXELS)
+                        .map(|g| g.map_or(0.0, |(wi, wo)| multiple(lobe.as_ref(), wi, wo)))
+                        .collect(),
+                };
                 let norm = single
                     .iter()
                     .zip(&values)
