@@ -284,7 +284,9 @@ fn fit_level(
     )
 }
 
-/// [`fit_level`] on `objective`, `options`' objective over `records` (its targets may differ).
+/// [`fit_level`] on `objective`, `options`' objective over `records`. Its targets may differ
+/// from `records`' only for a deterministic model: a stochastic one's start screening and
+/// the judging of its searches build their objectives from `records`.
 fn fit_level_on(
     objective: &Objective,
     records: &ShadingRecords,
