@@ -13,7 +13,8 @@
 //! | `--maps` and its options (`--texels`, `--normals`, `--bases`, `--holdout-photo N`) | fit each model as material maps ([`super::fit_maps`]) and write the maps report ([`crate::report::maps`]): the maps side by side, re-renders and residuals of every photo, the held-out photo's error, and each multi-bounce model minus `single` per texel and per basis material. `--holdout K` and `--mcmc` are refused (a maps fit holds out one photo) |
 
 use super::fit::{
-    fit_and_sample, load_records, select, FitFile, FitOptionArgs, McmcArgs, RegionReport,
+    fit_and_sample, load_records, measure_fits, select, FitFile, FitOptionArgs, McmcArgs,
+    RegionReport,
 };
 use super::fit_maps::{MapsArgs, MapsRun, MapsSet};
 use super::images::display_exposure;
@@ -115,7 +116,8 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
     };
     let fits = &done.fits;
     let run = done.posterior.as_ref().map(|r| &r.posterior);
-    let selection = select(&records, fits, &args.options);
+    let measured = measure_fits(&records, fits, &args.options);
+    let selection = select(&records, fits, &measured, &args.options);
 
     let mut held_out = Vec::new();
     if let Some(folds) = holdout {

@@ -16,14 +16,13 @@ use crate::fit::bayes::selection::{GaussianFit, Selection};
 use crate::fit::point::objective::GradientMethod;
 use crate::fit::point::params::{FresnelFamily, ParamSpace};
 use crate::fit::point::uniformity::{self, Uniformity};
-use crate::fit::point::StochasticFit;
+use crate::fit::point::{measure, Measured, StochasticFit};
 use crate::fit::{edge_tint, fit_model, FitOptions, ModelFit, Optimizer};
 use crate::loss::LossKind;
 use crate::material::FresnelSpec;
 use crate::microfacet::{Height, NdfKind};
 use crate::render::batch::Precision;
 use crate::render::plan::{Skip, Skips};
-use crate::render::render_all;
 use crate::shading::{ExclusionCounts, ShadingRecords};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -467,21 +466,44 @@ pub fn fit_and_sample(
     }))
 }
 
-/// The BIC ranking of fitted models on the records they were fitted to.
-pub fn select(records: &ShadingRecords, fits: &[ModelFit], options: &FitOptionArgs) -> Selection {
-    let measured: Vec<GaussianFit> = fits
-        .iter()
+/// Each fit measured by the objective it was fitted on ([`measure`]), in the order of `fits`.
+pub fn measure_fits(
+    records: &ShadingRecords,
+    fits: &[ModelFit],
+    options: &FitOptionArgs,
+) -> Vec<Measured> {
+    fits.iter()
         .map(|fit| {
-            let parameters = options.space(fit.material.model).dim();
-            GaussianFit::measure(
-                &fit.material,
-                &fit.exposed(records),
-                parameters,
-                options.seed,
+            measure(
+                records,
+                fit,
+                &options.fit_options(fit.material.model, false),
             )
         })
+        .collect()
+}
+
+/// The BIC ranking of `fits`, from their residuals as `measured` ([`measure_fits`]): the same
+/// seed as the fit, so a stochastic model sees the random numbers it was fitted with, and
+/// its pair residual.
+pub fn select(
+    records: &ShadingRecords,
+    fits: &[ModelFit],
+    measured: &[Measured],
+    options: &FitOptionArgs,
+) -> Selection {
+    let observations = 3 * records.weight.iter().filter(|w| **w > 0.0).count();
+    let gaussian: Vec<GaussianFit> = fits
+        .iter()
+        .zip(measured)
+        .map(|(fit, measured)| GaussianFit {
+            model: fit.material.model,
+            mean_squared_residual: measured.l2,
+            observations,
+            parameters: options.space(fit.material.model).dim(),
+        })
         .collect();
-    Selection::rank(&measured)
+    Selection::rank(&gaussian)
 }
 
 /// One line of the candidates table of a multi-model fit.
@@ -618,22 +640,24 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         return Ok(());
     };
     let (fits, posterior) = (&done.fits, &done.posterior);
-    let selection = select(&records, fits, &args.options);
+    let measured = measure_fits(&records, fits, &args.options);
+    let selection = select(&records, fits, &measured, &args.options);
     if !args.quiet && fits.len() > 1 {
         eprintln!("{}", selection.verdict);
     }
     // With a posterior the fit file reports the most probable model, else BIC's choice.
     let best = match posterior {
-        Some(run) => &fits[run.most_probable],
+        Some(run) => run.most_probable,
         None => fits
             .iter()
-            .find(|f| f.material.model == selection.preferred)
+            .position(|f| f.material.model == selection.preferred)
             .expect("the preferred model is one of the fits"),
     };
-
-    // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure).
-    let predicted = render_all(&best.material, &best.exposed(&records), args.options.seed);
-    let region = region.map(|applied| RegionReport::new(&applied, &records, &predicted));
+    // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure),
+    // from the render the fit's loss measured.
+    let predicted = &measured[best].prediction;
+    let best = &fits[best];
+    let region = region.map(|applied| RegionReport::new(&applied, &records, predicted));
     if let (Some(region), false) = (&region, args.quiet) {
         eprintln!("{}", region.summary());
     }
@@ -647,7 +671,7 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         &args.options,
     )
     .with_region(region);
-    let residual = residuals(&predicted, &records);
+    let residual = residuals(predicted, &records);
     let exposure = display_exposure(&records.target);
     write_photo_images(&residual_folder.path(""), &records, &residual, exposure, "")?;
     file.write(&output)?;

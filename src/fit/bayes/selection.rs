@@ -19,11 +19,7 @@
 //! The held-out comparison is paired because fold losses vary far more between folds (different
 //! photos) than between models on the same fold.
 
-use super::holdout::loss_of;
 use crate::bsdf::Model;
-use crate::loss::LossKind;
-use crate::material::Material;
-use crate::shading::ShadingRecords;
 use serde::Serialize;
 
 /// The mean squared residual is floored here so a perfect fit keeps a finite BIC.
@@ -84,24 +80,6 @@ pub struct GaussianFit {
 }
 
 impl GaussianFit {
-    /// Measure the residual of `material` on the loss pixels of `records` (same seed as the fit,
-    /// so a stochastic model sees the same random numbers it was fitted with, and the pair
-    /// residual of its two renders, free of the render's variance: see [`crate::loss`]).
-    pub fn measure(
-        material: &Material,
-        records: &ShadingRecords,
-        parameters: usize,
-        seed: u64,
-    ) -> GaussianFit {
-        let pixels = records.weight.iter().filter(|w| **w > 0.0).count();
-        GaussianFit {
-            model: material.model,
-            mean_squared_residual: loss_of(material, records, LossKind::L2, seed).unwrap_or(0.0),
-            observations: 3 * pixels,
-            parameters,
-        }
-    }
-
     /// `n ln(rss / n) + k ln n`.
     pub fn bic(&self) -> f64 {
         let n = self.observations.max(1) as f64;
