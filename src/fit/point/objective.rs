@@ -18,10 +18,10 @@
 use super::params::ParamSpace;
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::ScalarBrdf;
-use crate::bsdf::{differentiable, BounceCap};
+use crate::bsdf::{differentiable, BounceCap, Model};
 use crate::fit::point::params::Surface;
 use crate::loss::{ImageLayout, Loss, LossKind};
-use crate::render::anchors::Anchors;
+use crate::render::anchors::{Anchors, Corners};
 use crate::render::batch::{BatchRecords, Lobe, PixelTangents, Precision};
 use crate::render::plan::{MultiTerm, PlanSummary, RenderPlan, Skips};
 use crate::render::{
@@ -295,6 +295,31 @@ impl<'a> Objective<'a> {
         anchors: &Anchors,
         seed: u64,
     ) -> AnchoredPart<T> {
+        let AnchoredValues { multi, exact } = self.anchored_values_of(brdf, anchors, seed);
+        let multi_re: Vec<[f64; 3]> = multi.iter().map(|m| m.0.map(|v| v.re64())).collect();
+        let mut own: Vec<[f64; 3]> = anchors
+            .corners
+            .par_iter()
+            .zip(self.batch().lambert().par_iter())
+            .map(|(corners, lambert)| match corners {
+                Some(corners) => interpolate(corners, &multi_re, lambert),
+                None => [0.0; 3],
+            })
+            .collect();
+        for (k, value) in &exact {
+            own[*k] = value.map(|v| v.re64());
+        }
+        AnchoredPart { multi, exact, own }
+    }
+
+    /// What [`Objective::anchored_part`] interpolates: the multiple-bounce estimate at each
+    /// anchor, and the whole specular value at the pixels without anchors.
+    fn anchored_values_of<T: Real, B: ScalarBrdf<T> + ?Sized>(
+        &self,
+        brdf: &B,
+        anchors: &Anchors,
+        seed: u64,
+    ) -> AnchoredValues<T> {
         let spp = self.records.samples_per_pixel;
         let multi = anchor_values(brdf, anchors, self.plan().stochastic, spp, seed);
         let exact_slots: Vec<usize> = (0..anchors.corners.len())
@@ -302,33 +327,69 @@ impl<'a> Objective<'a> {
             .collect();
         let exact_pixels: Vec<usize> = exact_slots.iter().map(|&k| self.pixels[k]).collect();
         let exact_values = render_model(brdf, [T::zero(); 3], self.records, &exact_pixels, seed);
-        let multi_re: Vec<[f64; 3]> = multi.iter().map(|m| m.0.map(|v| v.re64())).collect();
-        let lambert = self.batch().lambert();
-        let mut own: Vec<[f64; 3]> = anchors
-            .corners
-            .par_iter()
-            .zip(lambert.par_iter())
-            .map(|(corners, lambert)| match corners {
-                Some(corners) => {
-                    let mut sum = [0.0; 3];
-                    for &(a, w) in corners {
-                        for c in 0..3 {
-                            sum[c] += w * multi_re[a as usize][c];
-                        }
-                    }
-                    [0, 1, 2].map(|c| sum[c] * PI * lambert[c])
-                }
-                None => [0.0; 3],
-            })
-            .collect();
-        for (&k, value) in exact_slots.iter().zip(&exact_values) {
-            own[k] = value.map(|v| v.re64());
-        }
-        AnchoredPart {
+        AnchoredValues {
             multi,
             exact: exact_slots.into_iter().zip(exact_values).collect(),
-            own,
         }
+    }
+
+    /// [`Objective::render_split`] at `x` before its interpolation: per seed, the anchors'
+    /// values and the pixels without anchors, with the anchors and each pixel's white
+    /// Lambertian radiance that interpolate them ([`interpolate`]), so that a caller can
+    /// combine several points' anchor values before it interpolates once
+    /// ([`super::projection`]); and the shared part with its Fresnel slope when `shared`.
+    /// `None` where `render_split`
+    /// gives `None`, or where the space fits an exposure (these parts are unexposed).
+    pub fn anchored_values(&self, x: &[f64], shared: bool) -> Option<AnchoredRender<'_>> {
+        let surface = self.space.surface(x);
+        let MultiTerm::Sparse(anchors) = self.plan().multi_term(&surface.single) else {
+            return None;
+        };
+        if self.space.exposure {
+            return None;
+        }
+        let material = self.space.material(x);
+        let single = material.single::<f64>();
+        let brdf = material.capped_brdf(self.plan().bounce_cap(&single));
+        Some(AnchoredRender {
+            anchors,
+            lambert: self.batch().lambert(),
+            shared: shared.then(|| {
+                let (values, tangents) = self.batch_shared(&surface, anchors, true);
+                (values, tangents.expect("asked for").fresnel_a)
+            }),
+            streams: self
+                .seeds
+                .iter()
+                .map(|&seed| self.anchored_values_of(brdf.as_ref(), anchors, seed))
+                .collect(),
+        })
+    }
+
+    /// For `kulla-conty` at `x`, where the batch kernel evaluates its whole lobe: the single
+    /// bounce with its derivative by the first Fresnel parameter of each channel, and the
+    /// whole render (single bounce and compensation lobe), both unexposed and without diffuse.
+    /// The compensation lobe is an image that does not depend on the Fresnel times its colour
+    /// `F_ms / (pi (1 - E_avg))` ([`crate::bsdf::kulla_conty::KullaConty::lobe_scale`]), so a
+    /// caller can take the image from the difference ([`super::projection`]). `None` for
+    /// other models, where the plan skips the lobe as faint, or where the space fits an
+    /// exposure.
+    pub fn compensation_parts(&self, x: &[f64]) -> Option<CompensationParts> {
+        let surface = self.space.surface(x);
+        if self.space.model != Model::KullaConty || self.space.exposure {
+            return None;
+        }
+        let MultiTerm::Exact = self.plan().multi_term(&surface.single) else {
+            return None;
+        };
+        let lobe = Lobe::of(Model::KullaConty, &surface.single)?;
+        let batch = self.batch();
+        let (single, tangents) = batch.render_with_tangents(&surface.single, [0.0; 3]);
+        Some(CompensationParts {
+            single,
+            single_slope: tangents.fresnel_a,
+            whole: batch.render(lobe, [0.0; 3]),
+        })
     }
 
     /// What the render plan skips, at the roughness of `material`.
@@ -703,6 +764,53 @@ impl<'a> Objective<'a> {
     }
 }
 
+/// `pi lambert sum_a w_a multi_a`: a pixel's sub-sample sum of the multiple-bounce term
+/// interpolated from the anchors `corners` (see [`Objective::anchored_part`]), from any
+/// per-anchor quantity that enters linearly, per channel.
+pub fn interpolate<const N: usize>(
+    corners: &Corners,
+    multi: &[[f64; N]],
+    lambert: &[f64; 3],
+) -> [f64; N] {
+    let mut sum = [0.0; N];
+    for &(a, w) in corners {
+        for (s, m) in sum.iter_mut().zip(&multi[a as usize]) {
+            *s += w * m;
+        }
+    }
+    std::array::from_fn(|i| sum[i] * PI * lambert[i % 3])
+}
+
+/// One seed's values before the interpolation ([`Objective::anchored_values_of`]).
+pub struct AnchoredValues<T> {
+    /// The multiple-bounce estimate at each anchor.
+    pub multi: Vec<Rgb<T>>,
+    /// The pixels without anchors (position in the pixel list) and their specular values.
+    pub exact: Vec<(usize, [T; 3])>,
+}
+
+/// A render through anchors at one point, per seed, before its interpolation
+/// ([`Objective::anchored_values`]).
+pub struct AnchoredRender<'o> {
+    pub anchors: &'o Anchors,
+    /// Per pixel of the list: its white Lambertian radiance.
+    pub lambert: &'o [[f64; 3]],
+    /// The part every seed shares ([`crate::render::SplitRender::shared`]) and its derivative
+    /// by the first Fresnel parameter of each channel, when asked for.
+    pub shared: Option<(Vec<[f64; 3]>, Vec<[f64; 3]>)>,
+    /// Per seed: the anchors' values and the pixels without anchors.
+    pub streams: Vec<AnchoredValues<f64>>,
+}
+
+/// The parts of a `kulla-conty` render ([`Objective::compensation_parts`]), per loss pixel.
+pub struct CompensationParts {
+    pub single: Vec<[f64; 3]>,
+    /// The derivative of `single` by the first Fresnel parameter (Schlick F0) of each channel.
+    pub single_slope: Vec<[f64; 3]>,
+    /// Single bounce and compensation lobe.
+    pub whole: Vec<[f64; 3]>,
+}
+
 /// One seed's part of a render through anchors ([`Objective::anchored_part`]).
 struct AnchoredPart<T> {
     /// The multiple-bounce estimate at each anchor.
@@ -810,4 +918,4 @@ impl Objective<'_> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -15,10 +15,12 @@
 //! polynomial approximation in F0, so the fitter always finishes with a joint search over all
 //! coordinates from the projected optimum.
 
-use super::objective::Objective;
+use super::objective::{interpolate, Objective};
 use super::params::{logit, sigmoid, FresnelFamily};
+use crate::bsdf::kulla_conty::KullaConty;
 use crate::bsdf::Model;
-use crate::render::{add_to, lambertian_pixels, SplitRender};
+use crate::render::anchors::Anchors;
+use crate::render::lambertian_pixels;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -40,6 +42,101 @@ const MOMENT_CHUNK: usize = 4096;
 /// Grid of the F0 scan before golden-section refinement.
 const F0_SCAN: usize = 201;
 const GOLDEN_ITERATIONS: usize = 80;
+
+/// The renders of [`Projection::node_renders`], from which each pixel's monomial coefficients
+/// in F0 follow ([`NodeRenders::coefficients`]).
+enum NodeRenders<'o> {
+    /// The whole render at every node, `[node][stream][pixel]`.
+    Whole {
+        renders: Vec<Vec<Vec<[f64; 3]>>>,
+        lagrange: &'o [[f64; MAX_NODES]],
+    },
+    /// The render plan interpolates the multiple-bounce term from anchors: the part every
+    /// stream shares (exact single bounce, affine in a Schlick F0) as its two monomial
+    /// coefficients per pixel, the multiple-bounce term as monomial coefficients per anchor
+    /// (the interpolation is linear, so it carries them to the pixels,
+    /// [`objective::interpolate`]) and, at the pixels without anchors, per pixel.
+    Anchored {
+        shared: Vec<[[f64; 2]; 3]>,
+        anchors: &'o Anchors,
+        lambert: &'o [[f64; 3]],
+        /// `[stream][anchor]`, coefficient `j` of channel `c` at `3 j + c`.
+        multi: Vec<Vec<[f64; 3 * MAX_NODES]>>,
+        /// `[stream]`: the pixels without anchors in increasing order, with their
+        /// coefficients laid out as `multi`.
+        exact: Vec<Vec<(usize, [f64; 3 * MAX_NODES])>>,
+    },
+    /// `kulla-conty`: the single bounce's two coefficients per pixel, and the compensation
+    /// lobe as an image `W` that does not depend on F0 times a colour `s(F0)` that depends
+    /// on nothing else: `A + B F0 + W s(F0)`, with `s` through the nodes as the whole renders
+    /// would give it ([`Objective::compensation_parts`]).
+    Compensated {
+        single: Vec<[[f64; 2]; 3]>,
+        image: Vec<[f64; 3]>,
+        /// Monomial coefficients of the interpolant of `s` through the nodes, per channel.
+        colour: [[f64; MAX_NODES]; 3],
+    },
+}
+
+impl NodeRenders<'_> {
+    /// Number of streams.
+    fn streams(&self) -> usize {
+        match self {
+            NodeRenders::Whole { renders, .. } => renders[0].len(),
+            NodeRenders::Anchored { multi, .. } => multi.len(),
+            NodeRenders::Compensated { .. } => 1,
+        }
+    }
+
+    /// Monomial coefficients in F0 of pixel `p`'s prediction in `stream`, per channel.
+    fn coefficients(&self, stream: usize, p: usize) -> [[f64; MAX_NODES]; 3] {
+        let mut a = [[0.0; MAX_NODES]; 3];
+        match self {
+            NodeRenders::Whole { renders, lagrange } => {
+                a = monomials(lagrange, |node| renders[node][stream][p]);
+            }
+            NodeRenders::Anchored {
+                shared,
+                anchors,
+                lambert,
+                multi,
+                exact,
+            } => {
+                let own = match &anchors.corners[p] {
+                    Some(corners) => interpolate(corners, &multi[stream], &lambert[p]),
+                    None => {
+                        let exact = &exact[stream];
+                        let i = exact
+                            .binary_search_by_key(&p, |&(k, _)| k)
+                            .expect("a pixel without anchors is evaluated exactly");
+                        exact[i].1
+                    }
+                };
+                for (c, (a, [c0, c1])) in a.iter_mut().zip(shared[p]).enumerate() {
+                    for (j, a) in a.iter_mut().enumerate() {
+                        *a = own[3 * j + c];
+                    }
+                    a[0] += c0;
+                    a[1] += c1;
+                }
+            }
+            NodeRenders::Compensated {
+                single,
+                image,
+                colour,
+            } => {
+                for (c, a) in a.iter_mut().enumerate() {
+                    for (a, s) in a.iter_mut().zip(colour[c]) {
+                        *a = image[p][c] * s;
+                    }
+                    a[0] += single[p][c][0];
+                    a[1] += single[p][c][1];
+                }
+            }
+        }
+        a
+    }
+}
 
 /// The projected problem of one objective.
 pub struct Projection<'o, 'r> {
@@ -134,6 +231,22 @@ impl Moments {
     }
 }
 
+/// Monomial coefficients, per channel, of the polynomial through the nodes' values
+/// `values(node)`: the values times the inverse Vandermonde matrix, whose columns `lagrange`
+/// holds (one per node).
+fn monomials(
+    lagrange: &[[f64; MAX_NODES]],
+    values: impl Fn(usize) -> [f64; 3],
+) -> [[f64; MAX_NODES]; 3] {
+    let mut a = [[0.0; MAX_NODES]; 3];
+    for (node, lagrange) in lagrange.iter().enumerate() {
+        for (a, y) in a.iter_mut().zip(values(node)) {
+            a.iter_mut().zip(lagrange).for_each(|(a, l)| *a += l * y);
+        }
+    }
+    a
+}
+
 /// Solves `V c = y` for the monomial coefficients `c` of the polynomial through `(x_j, y_j)`
 /// (Vandermonde by Gaussian elimination with partial pivoting; K <= 5 and well separated
 /// nodes).
@@ -226,51 +339,113 @@ impl<'o, 'r> Projection<'o, 'r> {
         x
     }
 
-    /// The objective's renders at every F0 node, `[node][stream][pixel]`. Where the plan
-    /// interpolates the multiple-bounce term, the part every stream shares (exact single bounce,
-    /// affine in a Schlick F0) is rendered at the first and last node only and interpolated
-    /// linearly at the others; each node still renders its own multiple-bounce estimates.
-    fn node_renders(&self, roughness: &[f64]) -> Vec<Vec<Vec<[f64; 3]>>> {
+    /// The objective's renders at every F0 node ([`NodeRenders`]). Where the plan interpolates
+    /// the multiple-bounce term, the shared part is rendered once, with its derivative by F0,
+    /// each node's anchors are evaluated, and the anchors' values are turned into monomial
+    /// coefficients before one interpolation per pixel. Interpolating every node's render,
+    /// as this did before, and adding the affine part to each, took a third of a `tabulated`
+    /// fit's projected start, for the same coefficients.
+    fn node_renders(&self, roughness: &[f64]) -> NodeRenders<'_> {
         let at = |f: f64| self.coordinates(roughness, [f; 3], [0.0; 3]);
-        let full = || {
-            self.nodes
+        let whole = || NodeRenders::Whole {
+            renders: self
+                .nodes
                 .iter()
                 .map(|&f| self.objective.renders(&at(f)))
-                .collect()
+                .collect(),
+            lagrange: &self.lagrange,
         };
-        let (first, last) = (self.nodes[0], self.nodes[self.nodes.len() - 1]);
-        let ends = (
-            self.objective.render_split(&at(first), true),
-            self.objective.render_split(&at(last), true),
-        );
-        let split = |s: Option<SplitRender<f64>>| s.and_then(|s| Some((s.shared?, s.own)));
-        let (Some((shared_first, own_first)), Some((shared_last, own_last))) =
-            (split(ends.0), split(ends.1))
-        else {
-            return full();
-        };
-        let (mut own_first, mut own_last) = (Some(own_first), Some(own_last));
-        let n = self.nodes.len();
-        let mut renders = Vec::with_capacity(n);
-        for (j, &f) in self.nodes.iter().enumerate() {
-            let own = match j {
-                0 => own_first.take(),
-                _ if j == n - 1 => own_last.take(),
-                _ => self.objective.render_split(&at(f), false).map(|s| s.own),
-            };
-            let Some(mut own) = own else {
-                return full();
-            };
-            let t = (f - first) / (last - first);
-            let shared: Vec<[f64; 3]> = shared_first
-                .iter()
-                .zip(&shared_last)
-                .map(|(a, b)| [0, 1, 2].map(|c| a[c] + t * (b[c] - a[c])))
-                .collect();
-            own.iter_mut().for_each(|r| add_to(r, &shared));
-            renders.push(own);
+        if let Some(compensated) = self.compensated(roughness) {
+            return compensated;
         }
-        renders
+        let first = self.nodes[0];
+        let Some(mut nodes) = self
+            .nodes
+            .iter()
+            .enumerate()
+            .map(|(j, &f)| self.objective.anchored_values(&at(f), j == 0))
+            .collect::<Option<Vec<_>>>()
+        else {
+            return whole();
+        };
+        // Affine in a Schlick F0: its slope is its derivative by F0, from the same pass.
+        let (shared_first, slope) = nodes[0].shared.take().expect("asked for");
+        let shared = shared_first
+            .iter()
+            .zip(&slope)
+            .map(|(a, b)| [0, 1, 2].map(|c| [a[c] - first * b[c], b[c]]))
+            .collect();
+        // Monomial coefficients of per-node values, laid out for `interpolate`.
+        let coefficients = |values: &dyn Fn(usize) -> [f64; 3]| {
+            let m = monomials(&self.lagrange, values);
+            std::array::from_fn(|i| m[i % 3][i / 3])
+        };
+        let (anchors, lambert) = (nodes[0].anchors, nodes[0].lambert);
+        let streams = nodes[0].streams.len();
+        let multi = (0..streams)
+            .map(|s| {
+                (0..anchors.points.len())
+                    .map(|a| coefficients(&|node| nodes[node].streams[s].multi[a].0))
+                    .collect()
+            })
+            .collect();
+        let exact = (0..streams)
+            .map(|s| {
+                let pixels = nodes[0].streams[s].exact.iter().enumerate();
+                pixels
+                    .map(|(i, &(k, _))| {
+                        (k, coefficients(&|node| nodes[node].streams[s].exact[i].1))
+                    })
+                    .collect()
+            })
+            .collect();
+        NodeRenders::Anchored {
+            shared,
+            anchors,
+            lambert,
+            multi,
+            exact,
+        }
+    }
+
+    /// [`NodeRenders::Compensated`] at `roughness`, or `None` where the objective gives no
+    /// [`Objective::compensation_parts`]. The image is taken at the last node, where the lobe
+    /// is brightest: `W = (whole - A - B F0) / s(F0)`. Two batch renders (one with tangents)
+    /// instead of one per node: a `kulla-conty` fit of `copper-flash` takes 0.71x the wall
+    /// time of five renders per roughness point (docs/speed.md).
+    fn compensated(&self, roughness: &[f64]) -> Option<NodeRenders<'_>> {
+        let at = |f: f64| self.coordinates(roughness, [f; 3], [0.0; 3]);
+        let last = self.nodes[self.nodes.len() - 1];
+        let parts = self.objective.compensation_parts(&at(last))?;
+        let colour_at = |f: f64| {
+            let material = self.objective.space.material(&at(f));
+            KullaConty::new(material.single::<f64>()).lobe_scale().0
+        };
+        let colours: Vec<[f64; 3]> = self.nodes.iter().map(|&f| colour_at(f)).collect();
+        let colour = monomials(&self.lagrange, |node| colours[node]);
+        let s_last = colours[colours.len() - 1];
+        let mut single = Vec::with_capacity(parts.single.len());
+        let mut image = Vec::with_capacity(parts.single.len());
+        for ((value, slope), whole) in parts
+            .single
+            .iter()
+            .zip(&parts.single_slope)
+            .zip(&parts.whole)
+        {
+            single.push([0, 1, 2].map(|c| [value[c] - last * slope[c], slope[c]]));
+            image.push([0, 1, 2].map(|c| {
+                if s_last[c] > 0.0 {
+                    (whole[c] - value[c]) / s_last[c]
+                } else {
+                    0.0
+                }
+            }));
+        }
+        Some(NodeRenders::Compensated {
+            single,
+            image,
+            colour,
+        })
     }
 
     /// The moments of the three channels over the loss pixels `pixels` (see [`Moments`]), in
@@ -281,7 +456,7 @@ impl<'o, 'r> Projection<'o, 'r> {
     fn moments(
         &self,
         pixels: std::ops::Range<usize>,
-        renders: &[Vec<Vec<[f64; 3]>>],
+        renders: &NodeRenders,
         target: &[[f64; 3]],
     ) -> [Moments; 3] {
         /// One channel's sums in fixed-size arrays (the first `k` entries used).
@@ -295,23 +470,13 @@ impl<'o, 'r> Projection<'o, 'r> {
             dt: f64,
         }
         let k = self.nodes.len();
-        let streams = renders[0].len();
+        let streams = renders.streams();
         let mut sums: [Sums; 3] = Default::default();
         for p in pixels {
             // Monomial coefficients of the stream's polynomial, per channel: the node values
             // times the inverse Vandermonde matrix.
-            let coefficients = |stream: usize| {
-                let mut a = [[0.0; MAX_NODES]; 3];
-                for (lagrange, r) in self.lagrange.iter().zip(renders) {
-                    let y = r[stream][p];
-                    for (a, y) in a.iter_mut().zip(y) {
-                        a.iter_mut().zip(lagrange).for_each(|(a, l)| *a += l * y);
-                    }
-                }
-                a
-            };
-            let a1 = coefficients(0);
-            let a2 = (streams > 1).then(|| coefficients(streams - 1));
+            let a1 = renders.coefficients(0, p);
+            let a2 = (streams > 1).then(|| renders.coefficients(streams - 1, p));
             for (c, m) in sums.iter_mut().enumerate() {
                 let v = self.weights[p][c];
                 if v == 0.0 {
@@ -394,6 +559,70 @@ impl<'o, 'r> Projection<'o, 'r> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fit::point::objective::tests::pinhole_records;
+    use crate::fit::point::params::ParamSpace;
+    use crate::loss::LossKind;
+    use crate::render::batch::Precision;
+
+    /// The split forms give the coefficients of the whole renders at every node, to rounding:
+    /// `tabulated` through the anchors (shared part from one render and its F0 derivative,
+    /// anchors' values turned into coefficients before the interpolation) and `kulla-conty`
+    /// as single bounce plus an image times a colour. A wrong slope, node order, channel
+    /// layout or colour moves them by far more (a 0.1% error in the slope fails).
+    #[test]
+    fn split_node_renders_give_the_whole_renders_coefficients() {
+        for model in [Model::Tabulated, Model::KullaConty] {
+            check_split_node_renders(model);
+        }
+    }
+
+    fn check_split_node_renders(model: Model) {
+        let space = ParamSpace {
+            diffuse: true,
+            ..ParamSpace::plain(model)
+        };
+        let truth = space.material(&[0.6f64.ln(), 1.8, 0.3, 0.0, -3.0, -2.0, -1.0]);
+        let records = pinhole_records(&truth);
+        let objective =
+            Objective::new(space, &records, LossKind::L2, 3).with_precision(Precision::F64);
+        let projection = Projection::new(&objective).expect("Schlick and L2 project");
+        for alpha in [0.25f64, 0.6, 1.2] {
+            let roughness = [alpha.ln()];
+            let split = projection.node_renders(&roughness);
+            let expected = match model {
+                Model::Tabulated => matches!(split, NodeRenders::Anchored { .. }),
+                _ => matches!(split, NodeRenders::Compensated { .. }),
+            };
+            assert!(expected, "{model} at alpha {alpha} is split");
+            let at = |f: f64| projection.coordinates(&roughness, [f; 3], [0.0; 3]);
+            let whole = NodeRenders::Whole {
+                renders: projection
+                    .nodes
+                    .iter()
+                    .map(|&f| objective.renders(&at(f)))
+                    .collect(),
+                lagrange: &projection.lagrange,
+            };
+            let pixels = objective.pixel_count();
+            let largest = (0..pixels)
+                .flat_map(|p| whole.coefficients(0, p).into_iter().flatten())
+                .fold(0.0, |m: f64, v| m.max(v.abs()));
+            assert!(largest > 0.0);
+            for p in 0..pixels {
+                let (a, w) = (split.coefficients(0, p), whole.coefficients(0, p));
+                for c in 0..3 {
+                    for j in 0..projection.nodes.len() {
+                        assert!(
+                            (a[c][j] - w[c][j]).abs() <= 1e-9 * largest,
+                            "{model} alpha {alpha} pixel {p} channel {c} coefficient {j}: {} vs {}",
+                            a[c][j],
+                            w[c][j]
+                        );
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn monomial_coefficients_reproduce_a_polynomial() {

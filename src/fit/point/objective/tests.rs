@@ -361,7 +361,7 @@ fn cui_pathwise_gradient_matches_finite_differences() {
 
 /// The pinhole template (9 point lights, a sample edge in view) at 48 x 48 with 4 sub-samples:
 /// grid nodes past the sample's edge take the geometry of the nearest pixel that sees it.
-fn pinhole_records(truth: &Material) -> ShadingRecords {
+pub(crate) fn pinhole_records(truth: &Material) -> ShadingRecords {
     let template = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("datasets/sources/aluminium-pinhole.capture.toml");
     let mut capture = crate::capture::Capture::open(&template).unwrap();
