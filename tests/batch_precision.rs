@@ -14,7 +14,7 @@ use bouncefit::bsdf::Model;
 use bouncefit::fit::point::objective::Objective;
 use bouncefit::fit::point::params::{FresnelFamily, ParamSpace};
 use bouncefit::fit::point::StochasticFit;
-use bouncefit::fit::{fit_model, FitOptions, Optimizer};
+use bouncefit::fit::{fit_model, FitOptions};
 use bouncefit::loss::LossKind;
 use bouncefit::render::batch::Precision;
 use common::repo;
@@ -90,23 +90,13 @@ fn f32_lanes_move_fits_by_less_than_a_thousandth_in_alpha() {
         ] {
             let fit = |precision| {
                 let options = FitOptions {
-                    space: ParamSpace {
-                        fresnel,
-                        ..ParamSpace::plain(model)
-                    },
-                    optimizer: Optimizer::Auto,
-                    loss: LossKind::L2,
-                    gradient: Default::default(),
-                    max_iters: 200,
-                    seed: 0,
-                    progress: false,
-                    starts: 1,
-                    projection: true,
-                    pyramid: 1,
-                    skips: Default::default(),
                     precision: Some(precision),
                     // The model's own objective: what the lanes' precision changes.
                     stochastic_fit: StochasticFit::Direct,
+                    ..FitOptions::defaults(ParamSpace {
+                        fresnel,
+                        ..ParamSpace::plain(model)
+                    })
                 };
                 fit_model(&records, &options).unwrap()
             };

@@ -104,6 +104,27 @@ pub struct FitOptions {
     pub stochastic_fit: StochasticFit,
 }
 
+impl FitOptions {
+    /// `fit`'s command-line defaults over `space`, without progress.
+    pub fn defaults(space: ParamSpace) -> FitOptions {
+        FitOptions {
+            space,
+            optimizer: Optimizer::Auto,
+            loss: LossKind::L2,
+            gradient: GradientMethod::Exact,
+            max_iters: 200,
+            seed: 0,
+            progress: false,
+            starts: 1,
+            projection: true,
+            pyramid: 1,
+            skips: Skips::all(),
+            precision: None,
+            stochastic_fit: StochasticFit::Corrected,
+        }
+    }
+}
+
 /// The loss of one photo at the fitted parameters.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PhotoLoss {
