@@ -24,9 +24,7 @@ use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::anchors::{Anchors, Corners};
 use crate::render::batch::{BatchRecords, Lobe, PixelTangents, Precision};
 use crate::render::plan::{MultiTerm, PlanSummary, RenderPlan, Skips};
-use crate::render::{
-    add_to, render_material, render_material_streams, render_planned_streams, SplitRender,
-};
+use crate::render::{add_to, render_material, render_material_streams, render_planned_streams};
 use crate::render::{anchor_values, render_model};
 use crate::scalar::{Real, Rgb};
 use crate::shading::ShadingRecords;
@@ -333,13 +331,13 @@ impl<'a> Objective<'a> {
         }
     }
 
-    /// [`Objective::render_split`] at `x` before its interpolation: per seed, the anchors'
+    /// [`Objective::anchored_renders`] at `x` before its interpolation: per seed, the anchors'
     /// values and the pixels without anchors, with the anchors and each pixel's white
     /// Lambertian radiance that interpolate them ([`interpolate`]), so that a caller can
     /// combine several points' anchor values before it interpolates once
     /// ([`super::projection`]); and the shared part with its Fresnel slope when `shared`.
-    /// `None` where `render_split`
-    /// gives `None`, or where the space fits an exposure (these parts are unexposed).
+    /// `None` where the plan does not interpolate, or where the space fits an exposure (these
+    /// parts are unexposed).
     pub fn anchored_values(&self, x: &[f64], shared: bool) -> Option<AnchoredRender<'_>> {
         let surface = self.space.surface(x);
         let MultiTerm::Sparse(anchors) = self.plan().multi_term(&surface.single) else {
@@ -475,16 +473,8 @@ impl<'a> Objective<'a> {
             let render = self.batch().render(lobe, surface.diffuse);
             return vec![self.exposed(render, surface.exposure); self.seeds.len()];
         }
-        if let Some(split) = self.render_split(x, true) {
-            let shared = split.shared.expect("asked for");
-            return split
-                .own
-                .into_iter()
-                .map(|mut own| {
-                    add_to(&mut own, &shared);
-                    own
-                })
-                .collect();
+        if let Some(renders) = self.anchored_renders(x) {
+            return renders;
         }
         let material = self.space.material(x);
         let exposure = self.space.exposure(x);
@@ -500,9 +490,11 @@ impl<'a> Objective<'a> {
         .collect()
     }
 
-    /// [`Objective::renders`] at `x` split as [`crate::render::render_planned_split`] splits them (the shared
-    /// part only when `shared`), or `None` when the plan does not interpolate at this roughness.
-    pub fn render_split(&self, x: &[f64], shared: bool) -> Option<SplitRender<f64>> {
+    /// [`Objective::renders`] where the plan interpolates the multiple-bounce term from
+    /// anchors (as [`crate::render::render_planned_split`] splits a render: the batch kernel's
+    /// exact single bounce and diffuse shared by every seed, each seed's interpolated term),
+    /// or `None` where it does not at this roughness.
+    fn anchored_renders(&self, x: &[f64]) -> Option<Vec<Vec<[f64; 3]>>> {
         let surface = self.space.surface(x);
         let MultiTerm::Sparse(anchors) = self.plan().multi_term(&surface.single) else {
             return None;
@@ -510,23 +502,21 @@ impl<'a> Objective<'a> {
         let material = self.space.material(x);
         let single = material.single::<f64>();
         let brdf = material.capped_brdf(self.plan().bounce_cap(&single));
-        let split = SplitRender {
-            shared: None,
-            own: self
-                .seeds
+        let shared = self.exposed(
+            self.batch_shared(&surface, anchors, false).0,
+            surface.exposure,
+        );
+        Some(
+            self.seeds
                 .iter()
-                .map(|&seed| self.anchored_part(brdf.as_ref(), anchors, seed).own)
+                .map(|&seed| {
+                    let own = self.anchored_part(brdf.as_ref(), anchors, seed).own;
+                    let mut own = self.exposed(own, surface.exposure);
+                    add_to(&mut own, &shared);
+                    own
+                })
                 .collect(),
-        };
-        let shared = shared.then(|| self.batch_shared(&surface, anchors, false).0);
-        Some(SplitRender {
-            shared: shared.map(|r| self.exposed(r, surface.exposure)),
-            own: split
-                .own
-                .into_iter()
-                .map(|r| self.exposed(r, surface.exposure))
-                .collect(),
-        })
+        )
     }
 
     /// The loss bound to this objective's pixels.

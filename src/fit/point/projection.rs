@@ -55,7 +55,7 @@ enum NodeRenders<'o> {
     /// stream shares (exact single bounce, affine in a Schlick F0) as its two monomial
     /// coefficients per pixel, the multiple-bounce term as monomial coefficients per anchor
     /// (the interpolation is linear, so it carries them to the pixels,
-    /// [`objective::interpolate`]) and, at the pixels without anchors, per pixel.
+    /// [`interpolate`]) and, at the pixels without anchors, per pixel.
     Anchored {
         shared: Vec<[[f64; 2]; 3]>,
         anchors: &'o Anchors,
