@@ -1215,3 +1215,43 @@ pub fn relative_error(predicted: &[[f64; 3]], records: &ShadingRecords, pixels: 
     }
     (error / signal.max(1e-300)).sqrt()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn predicted_decrease_is_the_quadratic_models_drop_to_its_minimum() {
+        // cost(x) = 2 g.x + x^T M x, in the halved gradient and matrix `linearise` returns:
+        // its minimum is at -M^-1 g, and the decrease from 0 to there is g^T M^-1 g.
+        let matrix = [4.0, 1.0, 0.5, 1.0, 3.0, -0.2, 0.5, -0.2, 2.0];
+        let gradient = [0.3, -1.2, 0.7];
+        let cost = |x: &[f64]| {
+            let quadratic: f64 = (0..3)
+                .map(|a| (0..3).map(|b| x[a] * matrix[a * 3 + b] * x[b]).sum::<f64>())
+                .sum();
+            2.0 * (0..3).map(|a| gradient[a] * x[a]).sum::<f64>() + quadratic
+        };
+        let minimum: Vec<f64> = Cholesky::new(&matrix, 3)
+            .expect("positive definite")
+            .solve(&gradient)
+            .iter()
+            .map(|s| -s)
+            .collect();
+        let decrease = predicted_decrease(&matrix, &gradient, 3).expect("positive definite");
+        assert!(
+            (decrease - (cost(&[0.0; 3]) - cost(&minimum))).abs() < 1e-12,
+            "{decrease}"
+        );
+        // No step from the minimum lowers the cost.
+        for a in 0..3 {
+            let mut x = minimum.clone();
+            x[a] += 1e-3;
+            assert!(cost(&x) > cost(&minimum));
+        }
+        assert_eq!(
+            predicted_decrease(&[1.0, 2.0, 2.0, 1.0], &[1.0, 0.0], 2),
+            None
+        );
+    }
+}
