@@ -108,7 +108,7 @@ impl AlbedoTable {
     }
 
     /// Position of `alpha` on the log grid: lower index and weight of the upper node.
-    fn alpha_cell<T: Real>(alpha: T) -> (usize, T) {
+    pub fn alpha_cell<T: Real>(alpha: T) -> (usize, T) {
         log_cell(alpha, ALPHA_MIN, ALPHA_MAX, ALPHA_COUNT)
     }
 
@@ -138,8 +138,13 @@ impl AlbedoTable {
 
     /// `E(mu, alpha)`: white directional albedo of `single` at incidence cosine `mu`.
     pub fn e<T: Real>(&self, mu: f64, alpha: T) -> T {
-        let (i, t) = Self::alpha_cell(alpha);
-        let (j, u) = Self::mu_cell(mu);
+        self.e_in_cells(Self::mu_cell(mu), Self::alpha_cell(alpha))
+    }
+
+    /// [`AlbedoTable::e`] at a [`AlbedoTable::mu_cell`] and an [`AlbedoTable::alpha_cell`]
+    /// computed beforehand: a model that reads many directions at one roughness finds the
+    /// roughness cell once.
+    pub fn e_in_cells<T: Real>(&self, (j, u): (usize, f64), (i, t): (usize, T)) -> T {
         let at = |a: usize| {
             self.ln_e[a * MU_COUNT + j] * (1.0 - u) + self.ln_e[a * MU_COUNT + j + 1] * u
         };

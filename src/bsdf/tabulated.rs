@@ -181,6 +181,45 @@ impl HeitzTable {
     }
 }
 
+/// What the multiple-bounce lobe reads of a direction pair, which does not depend on the
+/// material: the table cells of the two polar angles and the azimuth difference, the warped
+/// polar coordinates the Fresnel weights are tabulated over, and the albedo table's cells of
+/// the two cosines. A caller that evaluates the same directions at many parameters (`fit
+/// --maps` over a texel's Levenberg-Marquardt iterations) computes it once per direction pair
+/// and calls [`Tabulated::multiple_at`]: that takes the `acos`, `atan2`, `cbrt` and square
+/// roots out of every evaluation, with the same value to the last bit.
+#[derive(Clone, Copy, Debug)]
+pub struct LobeDirections {
+    cells: [(usize, f64); 3],
+    warped: [f64; 2],
+    mu_cells: [(usize, f64); 2],
+}
+
+impl LobeDirections {
+    /// The pair (`wi`, `wo`), unit vectors in the local frame; `None` where either is at or
+    /// below the horizon, where the lobe is 0.
+    pub fn new(wi: [f64; 3], wo: [f64; 3]) -> Option<LobeDirections> {
+        let ([xi, yi, zi], [xo, yo, zo]) = (wi, wo);
+        if zi <= 0.0 || zo <= 0.0 {
+            return None;
+        }
+        let phi = (xi * yo - yi * xo).abs().atan2(xi * xo + yi * yo);
+        let theta_max = THETA_MAX_DEG.to_radians();
+        let (theta_i, theta_o) = (zi.min(1.0).acos(), zo.min(1.0).acos());
+        let warped = [warped_x(theta_i, theta_max), warped_x(theta_o, theta_max)];
+        let pi = std::f64::consts::PI;
+        Some(LobeDirections {
+            cells: [
+                warped_cell(theta_i, warped[0], THETA_COUNT, theta_max),
+                warped_cell(theta_o, warped[1], THETA_COUNT, theta_max),
+                warped_cell(phi, warped_x(phi, pi), PHI_COUNT, pi),
+            ],
+            warped,
+            mu_cells: [AlbedoTable::mu_cell(zi), AlbedoTable::mu_cell(zo)],
+        })
+    }
+}
+
 /// `single` plus the tabulated multiple-bounce lobe of `heitz`.
 #[derive(Clone)]
 pub struct Tabulated<T> {
@@ -189,8 +228,9 @@ pub struct Tabulated<T> {
     table: &'static HeitzTable,
     albedo: &'static AlbedoTable,
     /// `sqrt(ax ay)` and its cell.
-    alpha: T,
     alpha_cell: (usize, T),
+    /// The albedo table's cell of `sqrt(ax ay)`.
+    albedo_cell: (usize, T),
     /// `1 / (pi (1 - E_avg))`, the normalisation of `f_kc`.
     scale: T,
     /// The Fresnel weight of each order ([`vertex_fresnel`]).
@@ -219,8 +259,8 @@ impl<T: Real> Tabulated<T> {
             single,
             table: HeitzTable::get(ndf),
             albedo,
-            alpha,
             alpha_cell,
+            albedo_cell: AlbedoTable::alpha_cell(alpha),
             scale,
             fresnel: OrderFresnel::new(&single.fresnel, ndf, alpha_cell),
         }
@@ -228,28 +268,27 @@ impl<T: Real> Tabulated<T> {
 
     /// The multiple-bounce lobe, 1/sr.
     pub fn multiple(&self, wi: Vec3<T>, wo: Vec3<T>) -> Rgb<T> {
-        let (zi, zo) = (wi.z.re64(), wo.z.re64());
-        if zi <= 0.0 || zo <= 0.0 {
-            return Rgb::splat(T::zero());
-        }
-        let (xi, yi, xo, yo) = (wi.x.re64(), wi.y.re64(), wo.x.re64(), wo.y.re64());
-        let phi = (xi * yo - yi * xo).abs().atan2(xi * xo + yi * yo);
-        let theta_max = THETA_MAX_DEG.to_radians();
-        let (theta_i, theta_o) = (zi.min(1.0).acos(), zo.min(1.0).acos());
-        let (xi, xo) = (warped_x(theta_i, theta_max), warped_x(theta_o, theta_max));
-        let pi = std::f64::consts::PI;
-        let cells = [
-            warped_cell(theta_i, xi, THETA_COUNT, theta_max),
-            warped_cell(theta_o, xo, THETA_COUNT, theta_max),
-            warped_cell(phi, warped_x(phi, pi), PHI_COUNT, pi),
-        ];
+        let re = |v: Vec3<T>| [v.x.re64(), v.y.re64(), v.z.re64()];
+        LobeDirections::new(re(wi), re(wo)).map_or(Rgb::splat(T::zero()), |directions| {
+            self.multiple_at(&directions)
+        })
+    }
+
+    /// The multiple-bounce lobe, 1/sr, at directions prepared by [`LobeDirections::new`].
+    pub fn multiple_at(&self, directions: &LobeDirections) -> Rgb<T> {
+        let LobeDirections {
+            cells,
+            warped: [xi, xo],
+            mu_cells: [mu_i, mu_o],
+        } = *directions;
         let (i, t) = self.alpha_cell;
         let below = self.table.directional(i, cells);
         let above = self.table.directional(i + 1, cells);
         let values = std::array::from_fn(|k| T::c(below[k]) + T::c(above[k] - below[k]) * t);
         let sum = self.fresnel.weigh(xi, xo, values);
-        let lost = |z: f64| (T::one() - self.albedo.e(z, self.alpha)).max_c(0.0);
-        sum.scale(lost(zi) * lost(zo) * self.scale)
+        let lost =
+            |mu_cell| (T::one() - self.albedo.e_in_cells(mu_cell, self.albedo_cell)).max_c(0.0);
+        sum.scale(lost(mu_i) * lost(mu_o) * self.scale)
     }
 }
 
