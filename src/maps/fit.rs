@@ -32,14 +32,16 @@
 //! thousands of walks per texel per iteration; they are refused with that reason.
 
 use super::{normal_from_slopes, to_shading_frame, MaterialMaps, TexelGrid};
-use crate::bsdf::{differentiable, BounceCap, Model, Rng};
+use crate::bsdf::single::SingleBounce;
+use crate::bsdf::tabulated::{LobeDirections, Tabulated};
+use crate::bsdf::{differentiable, BounceCap, Model, Rng, ScalarBrdf};
 use crate::error::{Error, Result};
-use crate::fit::cholesky::Cholesky;
 use crate::fit::point::params::{logit, sigmoid, ParamSpace};
 use crate::material::{FresnelSpec, Material};
 use crate::progress::Progress;
 use crate::scalar::{Real, Rgb, Vec3};
 use crate::shading::ShadingRecords;
+use nalgebra::{SMatrix, SVector};
 use num_dual::{Dual64, DualSVec64};
 use rand::SeedableRng;
 use rayon::prelude::*;
@@ -266,6 +268,29 @@ struct TexelModel<'a> {
     space: ParamSpace,
     normals: bool,
     records: &'a ShadingRecords,
+    /// For `tabulated` without normals, each sub-sample's directions as its lobe reads them,
+    /// prepared once for every evaluation of the fit ([`LobeDirections`]).
+    lobe_directions: Option<Vec<Option<LobeDirections>>>,
+}
+
+/// A texel's BRDF at one point of its coordinates.
+enum TexelBrdf<'a, T> {
+    /// `tabulated`, reading the sub-samples' prepared directions.
+    Tabulated(Tabulated<T>, &'a [Option<LobeDirections>]),
+    Any(Box<dyn ScalarBrdf<T>>),
+}
+
+impl<T: Real> TexelBrdf<'_, T> {
+    /// `f` at sub-sample `s`, whose directions in the texel's shading frame are `wi`, `wo`.
+    fn eval(&self, s: usize, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
+        match self {
+            TexelBrdf::Tabulated(lobe, directions) => {
+                let single = lobe.single.eval(wi, wo);
+                directions[s].map_or(single, |d| single + lobe.multiple_at(&d))
+            }
+            TexelBrdf::Any(brdf) => brdf.eval_total(wi, wo, rng),
+        }
+    }
 }
 
 /// A Gaussian prior per coordinate: centre and precision `1 / sigma^2`, for a texel of `kind`.
@@ -311,7 +336,32 @@ struct TexelFit {
     precision: Vec<f64>,
 }
 
-impl TexelModel<'_> {
+impl<'a> TexelModel<'a> {
+    fn new(space: ParamSpace, normals: bool, records: &'a ShadingRecords) -> TexelModel<'a> {
+        let lobe_directions = (space.model == Model::Tabulated && !normals).then(|| {
+            (records.wi.par_iter().zip(&records.wo))
+                .map(|(&wi, &wo)| LobeDirections::new(wi, wo))
+                .collect()
+        });
+        TexelModel {
+            space,
+            normals,
+            records,
+            lobe_directions,
+        }
+    }
+
+    /// The texel's BRDF at the surface of its base coordinates.
+    fn brdf<T: Real>(&self, single: SingleBounce<T>) -> TexelBrdf<'_, T> {
+        match &self.lobe_directions {
+            Some(directions) => TexelBrdf::Tabulated(Tabulated::new(single), directions),
+            None => TexelBrdf::Any(
+                differentiable(self.space.model, single, BounceCap::NONE)
+                    .expect("maps fits take analytic models"),
+            ),
+        }
+    }
+
     fn dim(&self) -> usize {
         self.space.dim() + if self.normals { 2 } else { 0 }
     }
@@ -327,14 +377,16 @@ impl TexelModel<'_> {
     }
 
     /// Predictions of `pixels` at coordinates `x`, at any scalar type.
-    fn predict<T: Real>(&self, x: &[T], pixels: &[usize]) -> Vec<[T; 3]> {
+    fn predict<'s, T: Real>(
+        &'s self,
+        x: &[T],
+        pixels: &'s [usize],
+    ) -> impl Iterator<Item = [T; 3]> + 's {
         let lambert = self.space.surface(&x[..self.space.dim()]).diffuse;
         self.predict_parts(x, pixels)
-            .into_iter()
-            .map(|(specular, shading)| {
+            .map(move |(specular, shading)| {
                 [0, 1, 2].map(|c| specular[c] + lambert[c] * T::c(FRAC_1_PI) * shading[c])
             })
-            .collect()
     }
 
     /// Each pixel's prediction split by the diffuse albedo `rho`, which enters it linearly:
@@ -342,54 +394,54 @@ impl TexelModel<'_> {
     /// `f cos_s / cos * E` and `shading` that of `cos_s / cos * E` (`cos_s / cos` the
     /// foreshortening of the shading normal, 1 without normals). The diffuse coordinates of
     /// `x` are not read, so a Jacobian needs no dual slots for them.
-    fn predict_parts<T: Real>(&self, x: &[T], pixels: &[usize]) -> Vec<([T; 3], [T; 3])> {
+    fn predict_parts<'s, T: Real>(
+        &'s self,
+        x: &[T],
+        pixels: &'s [usize],
+    ) -> impl Iterator<Item = ([T; 3], [T; 3])> + 's {
         let base = self.space.dim();
         let surface = self.space.surface(&x[..base]);
-        let brdf = differentiable(self.space.model, surface.single, BounceCap::NONE)
-            .expect("maps fits take analytic models");
+        let brdf = self.brdf(surface.single);
         let normal = self
             .normals
             .then(|| normal_from_slopes(x[base], x[base + 1]));
         let spp = self.records.samples_per_pixel;
         let mean = T::c(1.0 / spp as f64);
         let mut rng = Rng::seed_from_u64(0);
-        pixels
-            .iter()
-            .map(|&p| {
-                let (mut specular, mut shading) = ([T::zero(); 3], [T::zero(); 3]);
-                for s in p * spp..(p + 1) * spp {
-                    let e = self.records.irradiance[s];
-                    if e == [0.0; 3] {
-                        continue;
-                    }
-                    let (wi, wo) = (
-                        Vec3::<T>::from_f64(self.records.wi[s]),
-                        Vec3::<T>::from_f64(self.records.wo[s]),
-                    );
-                    let (wi_l, wo_l, ratio) = match normal {
-                        None => (wi, wo, T::one()),
-                        Some(n) => {
-                            let (i, o) = (to_shading_frame(n, wi), to_shading_frame(n, wo));
-                            if i.z.re64() <= 0.0 || o.z.re64() <= 0.0 {
-                                continue;
-                            }
-                            (i, o, i.z / wi.z)
-                        }
-                    };
-                    let Rgb(f) = brdf.eval_total(wi_l, wo_l, &mut rng);
-                    for c in 0..3 {
-                        let weight = ratio * T::c(e[c]);
-                        specular[c] += f[c] * weight;
-                        shading[c] += weight;
-                    }
+        pixels.iter().map(move |&p| {
+            let (mut specular, mut shading) = ([T::zero(); 3], [T::zero(); 3]);
+            for s in p * spp..(p + 1) * spp {
+                let e = self.records.irradiance[s];
+                if e == [0.0; 3] {
+                    continue;
                 }
-                (specular.map(|v| v * mean), shading.map(|v| v * mean))
-            })
-            .collect()
+                let (wi, wo) = (
+                    Vec3::<T>::from_f64(self.records.wi[s]),
+                    Vec3::<T>::from_f64(self.records.wo[s]),
+                );
+                let (wi_l, wo_l, ratio) = match normal {
+                    None => (wi, wo, T::one()),
+                    Some(n) => {
+                        let (i, o) = (to_shading_frame(n, wi), to_shading_frame(n, wo));
+                        if i.z.re64() <= 0.0 || o.z.re64() <= 0.0 {
+                            continue;
+                        }
+                        (i, o, i.z / wi.z)
+                    }
+                };
+                let Rgb(f) = brdf.eval(s, wi_l, wo_l, &mut rng);
+                for c in 0..3 {
+                    let weight = ratio * T::c(e[c]);
+                    specular[c] += f[c] * weight;
+                    shading[c] += weight;
+                }
+            }
+            (specular.map(|v| v * mean), shading.map(|v| v * mean))
+        })
     }
 
-    /// `(cost, gradient, Gauss-Newton matrix, data cost, data precision)` of the texel's MAP
-    /// objective `sum w (p - t)^2 / sigma^2 + sum precision (x - centre)^2` at `x`.
+    /// The texel's MAP objective `sum w (p - t)^2 / sigma^2 + sum precision (x - centre)^2`
+    /// linearised at `x`.
     ///
     /// `N` is [`TexelModel::dim`] and `M = N - 3`: the kernel runs in dual numbers over the
     /// specular coordinates and slopes only (`M` slots), and the diffuse albedo's columns of
@@ -402,26 +454,21 @@ impl TexelModel<'_> {
         pixels: &[usize],
         sigma2: f64,
         prior: &Prior,
-    ) -> (f64, Vec<f64>, Vec<f64>, f64, Vec<f64>) {
+    ) -> Linearised<N> {
         let diffuse_at = self.specular_dim();
         let slot = |i: usize| if i < diffuse_at { i } else { i - 3 };
-        let coords: Vec<DualSVec64<M>> = x
-            .iter()
-            .enumerate()
-            .map(|(i, &v)| match i.checked_sub(diffuse_at) {
-                Some(c) if c < 3 => DualSVec64::from_re(v),
-                _ => DualSVec64::from_re(v).derivative(slot(i)),
-            })
-            .collect();
+        let coords: [DualSVec64<M>; N] = std::array::from_fn(|i| match i.checked_sub(diffuse_at) {
+            Some(c) if c < 3 => DualSVec64::from_re(x[i]),
+            _ => DualSVec64::from_re(x[i]).derivative(slot(i)),
+        });
         let lambert = [0, 1, 2].map(|c| {
             let rho = sigmoid(Dual64::from_re(x[diffuse_at + c]).derivative());
             (rho.re * FRAC_1_PI, rho.eps * FRAC_1_PI)
         });
-        let parts = self.predict_parts(&coords, pixels);
-        let mut gradient = vec![0.0; N];
-        let mut matrix = vec![0.0; N * N];
+        let mut gradient = SVector::<f64, N>::zeros();
+        let mut matrix = SMatrix::<f64, N, N>::zeros();
         let mut data_cost = 0.0;
-        for ((specular, shading), &p) in parts.iter().zip(pixels) {
+        for ((specular, shading), &p) in self.predict_parts(&coords, pixels).zip(pixels) {
             let w = self.records.weight[p];
             let scale = w / sigma2;
             for c in 0..3 {
@@ -447,30 +494,35 @@ impl TexelModel<'_> {
                     let ja = scale * j[a];
                     gradient[a] += ja * r;
                     for b in 0..=a {
-                        matrix[a * N + b] += ja * j[b];
+                        matrix[(a, b)] += ja * j[b];
                     }
                 }
             }
         }
-        let data_precision: Vec<f64> = (0..N).map(|a| matrix[a * N + a]).collect();
+        let data_precision = std::array::from_fn(|a| matrix[(a, a)]);
         let mut cost = data_cost / sigma2;
         for a in 0..N {
             let d = x[a] - prior.centre[a];
             cost += prior.precision[a] * d * d;
             gradient[a] += prior.precision[a] * d;
-            matrix[a * N + a] += prior.precision[a];
+            matrix[(a, a)] += prior.precision[a];
             for b in 0..a {
-                matrix[b * N + a] = matrix[a * N + b];
+                matrix[(b, a)] = matrix[(a, b)];
             }
         }
-        (cost, gradient, matrix, data_cost, data_precision)
+        Linearised {
+            cost,
+            gradient,
+            matrix,
+            data_cost,
+            data_precision,
+        }
     }
 
     /// The MAP objective at `x` in `f64`.
     fn cost(&self, x: &[f64], pixels: &[usize], sigma2: f64, prior: &Prior) -> f64 {
-        let predicted = self.predict(x, pixels);
         let mut cost = 0.0;
-        for (value, &p) in predicted.iter().zip(pixels) {
+        for (value, &p) in self.predict(x, pixels).zip(pixels) {
             for (v, t) in value.iter().zip(self.records.target[p]) {
                 cost += self.records.weight[p] * (v - t).powi(2) / sigma2;
             }
@@ -480,10 +532,10 @@ impl TexelModel<'_> {
             .sum::<f64>()
     }
 
-    /// Levenberg-Marquardt (Marquardt's diagonal scaling) from `x`, exact Jacobians.
+    /// Levenberg-Marquardt (Marquardt's diagonal scaling) from `start`, exact Jacobians.
     fn solve<const N: usize, const M: usize>(
         &self,
-        mut x: Vec<f64>,
+        start: Vec<f64>,
         pixels: &[usize],
         sigma2: f64,
         prior: &Prior,
@@ -491,46 +543,40 @@ impl TexelModel<'_> {
         if pixels.is_empty() {
             return TexelFit {
                 kind: prior.kind,
-                x,
+                x: start,
                 data_cost: 0.0,
                 residuals: 0,
                 precision: vec![0.0; N],
             };
         }
+        let mut x = SVector::<f64, N>::from_column_slice(&start);
         let mut damping = 1e-3;
-        let (mut cost, mut gradient, mut matrix, mut data_cost, mut precision) =
-            self.linearise::<N, M>(&x, pixels, sigma2, prior);
+        let mut at = self.linearise::<N, M>(x.as_slice(), pixels, sigma2, prior);
         for _ in 0..MAX_ITERATIONS {
-            let noise = (data_cost / (3 * pixels.len()) as f64).max(sigma2);
-            let settled = predicted_decrease(&matrix, &gradient, N)
+            let noise = (at.data_cost / (3 * pixels.len()) as f64).max(sigma2);
+            let settled = predicted_decrease(&at.matrix, &at.gradient)
                 .is_some_and(|decrease| decrease * sigma2 / noise < NEGLIGIBLE_DECREASE);
             if settled {
                 break;
             }
             let mut improved = false;
             for _ in 0..10 {
-                let mut damped = matrix.clone();
+                let mut damped = at.matrix;
                 for a in 0..N {
-                    damped[a * N + a] += damping * matrix[a * N + a].max(1e-12);
+                    damped[(a, a)] += damping * at.matrix[(a, a)].max(1e-12);
                 }
-                let Some(factor) = Cholesky::new(&damped, N) else {
+                let Some(factor) = damped.cholesky() else {
                     damping *= 10.0;
                     continue;
                 };
-                let step = factor.solve(&gradient);
-                let trial: Vec<f64> = x
-                    .iter()
-                    .zip(&step)
-                    .map(|(v, s)| v - s.clamp(-2.0, 2.0))
-                    .collect();
-                let trial_cost = self.cost(&trial, pixels, sigma2, prior);
-                if trial_cost < cost {
-                    let gain = cost - trial_cost;
+                let trial = x - factor.solve(&at.gradient).map(|s| s.clamp(-2.0, 2.0));
+                let trial_cost = self.cost(trial.as_slice(), pixels, sigma2, prior);
+                if trial_cost < at.cost {
+                    let gain = at.cost - trial_cost;
                     x = trial;
-                    (cost, gradient, matrix, data_cost, precision) =
-                        self.linearise::<N, M>(&x, pixels, sigma2, prior);
+                    at = self.linearise::<N, M>(x.as_slice(), pixels, sigma2, prior);
                     damping = (damping / 3.0).max(1e-9);
-                    improved = gain > 1e-9 * cost.max(1e-12);
+                    improved = gain > 1e-9 * at.cost.max(1e-12);
                     break;
                 }
                 damping *= 4.0;
@@ -541,10 +587,10 @@ impl TexelModel<'_> {
         }
         TexelFit {
             kind: prior.kind,
-            x,
-            data_cost,
+            x: x.as_slice().to_vec(),
+            data_cost: at.data_cost,
             residuals: 3 * pixels.len(),
-            precision,
+            precision: at.data_precision.to_vec(),
         }
     }
 
@@ -716,11 +762,7 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         height: options.height,
         ..ParamSpace::plain(options.model)
     };
-    let model = TexelModel {
-        space,
-        normals: options.normals,
-        records,
-    };
+    let model = TexelModel::new(space, options.normals, records);
     let trials = match options.validation_photo {
         Some(_) if options.max_bases > 1 => options.max_bases,
         _ => 0,
@@ -740,10 +782,7 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
     let (mut bases, mut roughness_floor) = (options.max_bases, None);
     if let (Some(photo), true) = (options.validation_photo, trials > 0) {
         let training = records.restricted_to_photos(|i| i != photo);
-        let held_out = TexelModel {
-            records: &training,
-            ..model
-        };
+        let held_out = TexelModel::new(space, options.normals, &training);
         let blocks = TexelBlocks::new(&training, options.grid, 2);
         let sampled = TexelBlocks::new(records, options.grid, 2);
         let validation: Vec<usize> = sampled
@@ -822,9 +861,24 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
 /// The decrease of a cost with gradient `2 gradient` and Gauss-Newton matrix `2 matrix` (as
 /// [`TexelModel::linearise`] returns them) from its point to the minimum of its quadratic
 /// model: `gradient^T matrix^-1 gradient`, or `None` where `matrix` is not positive definite.
-fn predicted_decrease(matrix: &[f64], gradient: &[f64], n: usize) -> Option<f64> {
-    let step = Cholesky::new(matrix, n)?.solve(gradient);
-    Some(step.iter().zip(gradient).map(|(s, g)| s * g).sum())
+fn predicted_decrease<const N: usize>(
+    matrix: &SMatrix<f64, N, N>,
+    gradient: &SVector<f64, N>,
+) -> Option<f64> {
+    Some(matrix.cholesky()?.solve(gradient).dot(gradient))
+}
+
+/// A texel's MAP objective linearised at a point ([`TexelModel::linearise`]).
+struct Linearised<const N: usize> {
+    cost: f64,
+    /// Half the gradient of `cost`.
+    gradient: SVector<f64, N>,
+    /// Half the Gauss-Newton matrix of `cost`, the prior's precision included.
+    matrix: SMatrix<f64, N, N>,
+    /// `sum w r^2` of the data term.
+    data_cost: f64,
+    /// The diagonal of the data term's half Gauss-Newton matrix `J^T J`.
+    data_precision: [f64; N],
 }
 
 /// Stages 1 and 2: every texel alone, of either kind, and the noise level.
@@ -1198,7 +1252,10 @@ fn maps_prediction(
         .par_iter()
         .map(|&p| {
             let t = grid.texel(model.records.uv[p * spp + spp / 2]);
-            model.predict(&texels[t].x, &[p])[0]
+            model
+                .predict(&texels[t].x, &[p])
+                .next()
+                .expect("one pixel, one prediction")
         })
         .collect()
 }
@@ -1221,6 +1278,60 @@ mod tests {
     use super::*;
 
     #[test]
+    fn tabulated_texels_read_prepared_directions_as_the_lobe_computes_them() {
+        // Pairs from the normal to grazing, both sides of the azimuth grid, and one below
+        // the horizon (the lobe is 0 there); targets so that the residuals are not zero.
+        let pairs: Vec<([f64; 3], [f64; 3])> = [
+            (0.0, 0.0, 0.3, 0.0),
+            (0.2, 0.5, 0.25, 0.7),
+            (1.1, 2.9, 1.2, -3.0),
+            (1.5, 0.1, 1.55, 3.1),
+            (0.8, 1.0, 1.7, 2.0),
+            (0.6, 0.0, 0.9, 1.6),
+        ]
+        .iter()
+        .map(|&(ti, pi, to, po): &(f64, f64, f64, f64)| {
+            let at = |t: f64, p: f64| [t.sin() * p.cos(), t.sin() * p.sin(), t.cos()];
+            (at(ti, pi), at(to, po))
+        })
+        .collect();
+        // Two pixels of three sub-samples each, so that a sub-sample's index is not its
+        // pixel's.
+        let mut records = ShadingRecords::of_pairs("pairs", &pairs);
+        records.samples_per_pixel = 3;
+        records.target = vec![[0.05, 0.1, 0.2], [0.3, 0.2, 0.1]];
+        records.weight = vec![1.0; 2];
+        let space = ParamSpace {
+            diffuse: true,
+            ..ParamSpace::plain(Model::Tabulated)
+        };
+        let prepared = TexelModel::new(space, false, &records);
+        assert!(prepared.lobe_directions.is_some());
+        let generic = TexelModel {
+            lobe_directions: None,
+            ..TexelModel::new(space, false, &records)
+        };
+        let pixels = [0, 1];
+        let prior = generic.generic_prior(Kind::Metal);
+        for x in [
+            vec![0.3f64.ln(), 0.5, -0.2, 1.0, -2.0, 0.0, 1.0],
+            vec![1.4f64.ln(), 2.0, 1.0, 0.0, 0.5, -1.0, -3.0],
+        ] {
+            let (a, b) = (
+                prepared.linearise::<7, 4>(&x, &pixels, 0.01, &prior),
+                generic.linearise::<7, 4>(&x, &pixels, 0.01, &prior),
+            );
+            assert!(a.cost > 0.0);
+            assert_eq!(a.cost, b.cost);
+            assert_eq!(a.gradient, b.gradient);
+            assert_eq!(a.matrix, b.matrix);
+            let values: Vec<[f64; 3]> = prepared.predict(&x, &pixels).collect();
+            let reference: Vec<[f64; 3]> = generic.predict(&x, &pixels).collect();
+            assert_eq!(values, reference);
+        }
+    }
+
+    #[test]
     fn predicted_decrease_is_the_quadratic_models_drop_to_its_minimum() {
         // cost(x) = 2 g.x + x^T M x, in the halved gradient and matrix `linearise` returns:
         // its minimum is at -M^-1 g, and the decrease from 0 to there is g^T M^-1 g.
@@ -1232,13 +1343,11 @@ mod tests {
                 .sum();
             2.0 * (0..3).map(|a| gradient[a] * x[a]).sum::<f64>() + quadratic
         };
-        let minimum: Vec<f64> = Cholesky::new(&matrix, 3)
-            .expect("positive definite")
-            .solve(&gradient)
-            .iter()
-            .map(|s| -s)
-            .collect();
-        let decrease = predicted_decrease(&matrix, &gradient, 3).expect("positive definite");
+        let m = SMatrix::<f64, 3, 3>::from_row_slice(&matrix);
+        let g = SVector::<f64, 3>::from_column_slice(&gradient);
+        let inverse = m.try_inverse().expect("invertible");
+        let minimum: Vec<f64> = (-(inverse * g)).as_slice().to_vec();
+        let decrease = predicted_decrease(&m, &g).expect("positive definite");
         assert!(
             (decrease - (cost(&[0.0; 3]) - cost(&minimum))).abs() < 1e-12,
             "{decrease}"
@@ -1250,7 +1359,10 @@ mod tests {
             assert!(cost(&x) > cost(&minimum));
         }
         assert_eq!(
-            predicted_decrease(&[1.0, 2.0, 2.0, 1.0], &[1.0, 0.0], 2),
+            predicted_decrease(
+                &SMatrix::<f64, 2, 2>::new(1.0, 2.0, 2.0, 1.0),
+                &SVector::<f64, 2>::new(1.0, 0.0)
+            ),
             None
         );
     }
