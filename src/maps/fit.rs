@@ -264,13 +264,28 @@ impl TexelBlocks {
 }
 
 /// The per-texel problem: coordinates, prediction and prior.
+#[derive(Clone, Copy)]
 struct TexelModel<'a> {
     space: ParamSpace,
     normals: bool,
     records: &'a ShadingRecords,
-    /// For `tabulated` without normals, each sub-sample's directions as its lobe reads them,
-    /// prepared once for every evaluation of the fit ([`LobeDirections`]).
-    lobe_directions: Option<Vec<Option<LobeDirections>>>,
+    /// Each sub-sample's directions as `tabulated`'s lobe reads them ([`prepared_directions`]).
+    lobe_directions: Option<&'a [Option<LobeDirections>]>,
+}
+
+/// For `tabulated` without normals, each sub-sample's directions as its lobe reads them
+/// ([`LobeDirections`]), prepared once for every evaluation of a fit; `None` otherwise (with
+/// normals the directions turn with each texel's slopes).
+fn prepared_directions(
+    space: &ParamSpace,
+    normals: bool,
+    records: &ShadingRecords,
+) -> Option<Vec<Option<LobeDirections>>> {
+    (space.model == Model::Tabulated && !normals).then(|| {
+        (records.wi.par_iter().zip(&records.wo))
+            .map(|(&wi, &wo)| LobeDirections::new(wi, wo))
+            .collect()
+    })
 }
 
 /// A texel's BRDF at one point of its coordinates.
@@ -336,24 +351,10 @@ struct TexelFit {
     precision: Vec<f64>,
 }
 
-impl<'a> TexelModel<'a> {
-    fn new(space: ParamSpace, normals: bool, records: &'a ShadingRecords) -> TexelModel<'a> {
-        let lobe_directions = (space.model == Model::Tabulated && !normals).then(|| {
-            (records.wi.par_iter().zip(&records.wo))
-                .map(|(&wi, &wo)| LobeDirections::new(wi, wo))
-                .collect()
-        });
-        TexelModel {
-            space,
-            normals,
-            records,
-            lobe_directions,
-        }
-    }
-
+impl TexelModel<'_> {
     /// The texel's BRDF at the surface of its base coordinates.
     fn brdf<T: Real>(&self, single: SingleBounce<T>) -> TexelBrdf<'_, T> {
-        match &self.lobe_directions {
+        match self.lobe_directions {
             Some(directions) => TexelBrdf::Tabulated(Tabulated::new(single), directions),
             None => TexelBrdf::Any(
                 differentiable(self.space.model, single, BounceCap::NONE)
@@ -762,7 +763,13 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         height: options.height,
         ..ParamSpace::plain(options.model)
     };
-    let model = TexelModel::new(space, options.normals, records);
+    let directions = prepared_directions(&space, options.normals, records);
+    let model = TexelModel {
+        space,
+        normals: options.normals,
+        records,
+        lobe_directions: directions.as_deref(),
+    };
     let trials = match options.validation_photo {
         Some(_) if options.max_bases > 1 => options.max_bases,
         _ => 0,
@@ -782,7 +789,11 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
     let (mut bases, mut roughness_floor) = (options.max_bases, None);
     if let (Some(photo), true) = (options.validation_photo, trials > 0) {
         let training = records.restricted_to_photos(|i| i != photo);
-        let held_out = TexelModel::new(space, options.normals, &training);
+        // The same sub-samples with other weights: the same prepared directions.
+        let held_out = TexelModel {
+            records: &training,
+            ..model
+        };
         let blocks = TexelBlocks::new(&training, options.grid, 2);
         let sampled = TexelBlocks::new(records, options.grid, 2);
         let validation: Vec<usize> = sampled
@@ -1305,11 +1316,17 @@ mod tests {
             diffuse: true,
             ..ParamSpace::plain(Model::Tabulated)
         };
-        let prepared = TexelModel::new(space, false, &records);
-        assert!(prepared.lobe_directions.is_some());
+        let directions = prepared_directions(&space, false, &records);
+        assert!(directions.is_some());
+        let prepared = TexelModel {
+            space,
+            normals: false,
+            records: &records,
+            lobe_directions: directions.as_deref(),
+        };
         let generic = TexelModel {
             lobe_directions: None,
-            ..TexelModel::new(space, false, &records)
+            ..prepared
         };
         let pixels = [0, 1];
         let prior = generic.generic_prior(Kind::Metal);
