@@ -89,16 +89,18 @@ light = { kind = "point", position = [-10.0, -5.0, 11.0], intensity = [3000.0, 3
 /// The truth maps (kulla-conty) at `side` texels rendered into `dir/set` by the flash template
 /// at `side` pixels, with 1% noise.
 fn truth_set(dir: &Path, side: usize) -> (MaterialMaps, PathBuf) {
-    let truth = truth_maps(Model::KullaConty, side);
+    truth_set_of(Model::KullaConty, dir, side, &[])
+}
+
+/// [`truth_set`] with the truth's model `model` and more `synth` options `extra`.
+fn truth_set_of(model: Model, dir: &Path, side: usize, extra: &[&str]) -> (MaterialMaps, PathBuf) {
+    let truth = truth_maps(model, side);
     let material = dir.join("truth.json");
     truth.save(&material, Default::default()).unwrap();
     let set = dir.join("set");
-    synth(
-        &material,
-        &flash_template(dir, side),
-        &set,
-        &["--noise", "0.01"],
-    );
+    let mut options = vec!["--noise", "0.01"];
+    options.extend_from_slice(extra);
+    synth(&material, &flash_template(dir, side), &set, &options);
     (truth, set)
 }
 
@@ -117,6 +119,28 @@ fn rms(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
         .flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).powi(2)))
         .sum();
     (sum / (3 * a.len()) as f64).sqrt()
+}
+
+/// The errors of fitted maps `got` against `truth`: roughness RMSE, diffuse albedo RMS and F0
+/// RMS over texels (and channels).
+fn map_errors(got: &MaterialMaps, truth: &MaterialMaps) -> [f64; 3] {
+    let (a, b) = (
+        got.roughness.as_ref().unwrap(),
+        truth.roughness.as_ref().unwrap(),
+    );
+    let alpha_rmse =
+        (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt();
+    [
+        alpha_rmse,
+        rms(
+            got.diffuse.as_ref().unwrap(),
+            truth.diffuse.as_ref().unwrap(),
+        ),
+        rms(
+            got.specular.as_ref().unwrap(),
+            truth.specular.as_ref().unwrap(),
+        ),
+    ]
 }
 
 /// `bouncefit fit SET --maps ...` into `out/NAME.json`; the fit file.
@@ -156,22 +180,7 @@ fn maps_fits_recover_known_maps_and_single_bounce_predicts_worse() {
         &["--models", "kulla-conty", "--holdout-photo", "9"],
     );
     let got = load_maps(&dir.path().join("kulla-conty.json"));
-    let alpha_rmse = {
-        let (a, b) = (
-            got.roughness.as_ref().unwrap(),
-            truth.roughness.as_ref().unwrap(),
-        );
-        let sum: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
-        (sum / a.len() as f64).sqrt()
-    };
-    let diffuse_rms = rms(
-        got.diffuse.as_ref().unwrap(),
-        truth.diffuse.as_ref().unwrap(),
-    );
-    let f0_rms = rms(
-        got.specular.as_ref().unwrap(),
-        truth.specular.as_ref().unwrap(),
-    );
+    let [alpha_rmse, diffuse_rms, f0_rms] = map_errors(&got, &truth);
     let held_out = fit["holdout"]["relative_error"].as_f64().unwrap();
     eprintln!(
         "kulla-conty maps: alpha RMSE {alpha_rmse:.4}, diffuse RMS {diffuse_rms:.4}, F0 RMS \
@@ -201,6 +210,59 @@ fn maps_fits_recover_known_maps_and_single_bounce_predicts_worse() {
         single_held_out > 1.5 * held_out,
         "single {single_held_out} vs kulla-conty {held_out}"
     );
+}
+
+/// Heitz's lobe per texel (issue #17 item 2, through issue #16's `tabulated`): the truth maps
+/// rendered by `heitz` itself, its random walk at every sub-sample (1024 walks per pixel, 1%
+/// noise), fitted back with `tabulated`. The rough copper's roughness comes back unbiased: its
+/// basis and the median over its texels within 2% of the truth. Measured at 32^2: basis 0.6469
+/// and median 0.6510 against 0.65 (`kulla-conty` maps of the same photos: basis 0.6354, -2.3%;
+/// with 256 walks per pixel, `tabulated`'s basis 0.6423). The per-texel bounds of the test above
+/// are not asserted here: at 32^2 the texels astride the disc's edge dominate them even for
+/// `tabulated` photos fitted with `tabulated` (alpha RMSE 0.013, albedo RMS 0.020, F0 0.022),
+/// and on `heitz`'s photos they are larger still (alpha RMSE 0.050 at 256 walks per pixel,
+/// 0.043 at 1024).
+#[test]
+fn tabulated_maps_recover_the_roughness_of_photos_rendered_by_heitzs_walk() {
+    let side = 32;
+    let dir = tempfile::tempdir().unwrap();
+    let (truth, set) = truth_set_of(Model::Heitz, dir.path(), side, &["--pixel-samples", "1024"]);
+    let fit = fit_maps(
+        &set,
+        dir.path(),
+        "tabulated",
+        &["--models", "tabulated", "--holdout-photo", "9"],
+    );
+    let got = load_maps(&dir.path().join("tabulated.json"));
+    let basis = fit["maps_fit"]["bases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["alpha"].as_f64().unwrap())
+        .fold(0.0, f64::max);
+    let (fitted, true_alpha) = (
+        got.roughness.as_ref().unwrap(),
+        truth.roughness.as_ref().unwrap(),
+    );
+    let mut copper: Vec<f64> = (0..fitted.len())
+        .filter(|&t| true_alpha[t] == METAL.1)
+        .map(|t| fitted[t])
+        .collect();
+    copper.sort_by(f64::total_cmp);
+    let median = copper[copper.len() / 2];
+    eprintln!(
+        "tabulated maps of heitz photos: copper basis alpha {basis:.4}, median over {} copper \
+         texels {median:.4}, held-out relative error {:.4}",
+        copper.len(),
+        fit["holdout"]["relative_error"].as_f64().unwrap()
+    );
+    for (what, alpha) in [("basis", basis), ("median texel", median)] {
+        assert!(
+            (alpha / METAL.1 - 1.0).abs() < 0.02,
+            "copper {what} alpha {alpha} against {}",
+            METAL.1
+        );
+    }
 }
 
 /// One basis for two materials (`--bases 1`): the basis sets the roughness prior, but each
