@@ -437,7 +437,11 @@ impl TexelModel<'_> {
                     shading[c] += weight;
                 }
             }
-            (specular.map(|v| v * mean), shading.map(|v| v * mean))
+            for c in 0..3 {
+                specular[c] *= mean;
+                shading[c] *= mean;
+            }
+            (specular, shading)
         })
     }
 
