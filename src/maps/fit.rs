@@ -31,7 +31,7 @@
 //! estimators would give each texel a noisy objective from a few dozen records and cost
 //! thousands of walks per texel per iteration; they are refused with that reason.
 
-use super::{normal_from_slopes, to_shading_frame, MaterialMaps, TexelGrid};
+use super::{normal_from_slopes, MaterialMaps, ShadingFrame, TexelGrid};
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::tabulated::{LobeDirections, Tabulated};
 use crate::bsdf::{differentiable, BounceCap, Model, Rng, ScalarBrdf};
@@ -403,9 +403,9 @@ impl TexelModel<'_> {
         let base = self.space.dim();
         let surface = self.space.surface(&x[..base]);
         let brdf = self.brdf(surface.single);
-        let normal = self
+        let frame = self
             .normals
-            .then(|| normal_from_slopes(x[base], x[base + 1]));
+            .then(|| ShadingFrame::new(normal_from_slopes(x[base], x[base + 1])));
         let spp = self.records.samples_per_pixel;
         let mean = T::c(1.0 / spp as f64);
         let mut rng = Rng::seed_from_u64(0);
@@ -420,10 +420,10 @@ impl TexelModel<'_> {
                     Vec3::<T>::from_f64(self.records.wi[s]),
                     Vec3::<T>::from_f64(self.records.wo[s]),
                 );
-                let (wi_l, wo_l, ratio) = match normal {
+                let (wi_l, wo_l, ratio) = match frame {
                     None => (wi, wo, T::one()),
-                    Some(n) => {
-                        let (i, o) = (to_shading_frame(n, wi), to_shading_frame(n, wo));
+                    Some(frame) => {
+                        let (i, o) = (frame.local(wi), frame.local(wo));
                         if i.z.re64() <= 0.0 || o.z.re64() <= 0.0 {
                             continue;
                         }

@@ -125,13 +125,30 @@ impl AnyMaterial {
     }
 }
 
-/// `w` (tangent space, `z` the geometric normal) in the shading frame of the unit normal `n`
-/// (see the module docs): `(w.s, w.t, w.n)`.
-pub fn to_shading_frame<T: Real>(n: Vec3<T>, w: Vec3<T>) -> Vec3<T> {
-    let x = Vec3::new(T::one(), T::zero(), T::zero());
-    let s = (x - n * n.x).normalize();
-    let t = n.cross(s);
-    Vec3::new(w.dot(s), w.dot(t), w.dot(n))
+/// The shading frame `(s, t, n)` of the unit normal `n` (see the module docs), built once for
+/// all the directions a texel sees.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadingFrame<T> {
+    s: Vec3<T>,
+    t: Vec3<T>,
+    n: Vec3<T>,
+}
+
+impl<T: Real> ShadingFrame<T> {
+    pub fn new(n: Vec3<T>) -> ShadingFrame<T> {
+        let x = Vec3::new(T::one(), T::zero(), T::zero());
+        let s = (x - n * n.x).normalize();
+        ShadingFrame {
+            s,
+            t: n.cross(s),
+            n,
+        }
+    }
+
+    /// `w` (tangent space, `z` the geometric normal) in the frame: `(w.s, w.t, w.n)`.
+    pub fn local(&self, w: Vec3<T>) -> Vec3<T> {
+        Vec3::new(w.dot(self.s), w.dot(self.t), w.dot(self.n))
+    }
 }
 
 /// The unit normal of tangent-space slopes `(p, q)`: `normalize(-p, -q, 1)`, the normal of the
@@ -164,11 +181,11 @@ mod tests {
     #[test]
     fn shading_frame_is_orthonormal_and_identity_for_the_geometric_normal() {
         let w = Vec3::<f64>::new(0.3, -0.2, 0.9).normalize();
-        let same = to_shading_frame(Vec3::new(0.0, 0.0, 1.0), w);
+        let same = ShadingFrame::new(Vec3::new(0.0, 0.0, 1.0)).local(w);
         assert!((same.x - w.x).abs() < 1e-15 && (same.y - w.y).abs() < 1e-15);
         let n = normal_from_slopes(0.4f64, -0.7);
         for w in [w, Vec3::<f64>::new(-0.5, 0.1, 0.3).normalize()] {
-            let local = to_shading_frame(n, w);
+            let local = ShadingFrame::new(n).local(w);
             assert!(
                 (local.length() - 1.0).abs() < 1e-14,
                 "rotation keeps length"
@@ -178,7 +195,7 @@ mod tests {
                 "z is the cosine against n"
             );
         }
-        let tilted = to_shading_frame(n, n);
+        let tilted = ShadingFrame::new(n).local(n);
         assert!((tilted.z - 1.0).abs() < 1e-14 && tilted.x.abs() < 1e-14);
     }
 }

@@ -3,7 +3,7 @@
 //! through the scalar `f64` reference kernel and the renderer's own pixel loop (so pixels are
 //! the same sub-sample means, with the same random streams, as [`crate::render::render_pixels`]).
 
-use super::{to_shading_frame, AnyMaterial, MaterialMaps};
+use super::{AnyMaterial, MaterialMaps, ShadingFrame};
 use crate::bsdf::Brdf;
 use crate::error::{Error, Result};
 use crate::render::{accumulate, render_pixels};
@@ -12,11 +12,12 @@ use crate::shading::ShadingRecords;
 use rayon::prelude::*;
 use std::f64::consts::FRAC_1_PI;
 
-/// What a texel evaluates: its specular model, diffuse albedo / pi and shading normal.
+/// What a texel evaluates: its specular model, diffuse albedo / pi and the frame of its
+/// shading normal.
 struct TexelLobe {
     brdf: Box<dyn Brdf>,
     lambert: [f64; 3],
-    normal: Option<Vec3<f64>>,
+    frame: Option<ShadingFrame<f64>>,
 }
 
 /// Predicted radiance of `pixels` for `maps`. Needs records built from a capture (with texture
@@ -40,17 +41,17 @@ pub fn render_maps(
             TexelLobe {
                 brdf: material.brdf(),
                 lambert: material.diffuse.map(|d| d * FRAC_1_PI),
-                normal: maps.normal(t).map(Vec3::from_f64),
+                frame: maps.normal(t).map(|n| ShadingFrame::new(Vec3::from_f64(n))),
             }
         })
         .collect();
     Ok(accumulate(records, pixels, [0.0; 3], seed, |_, s, rng| {
         let lobe = &lobes[maps.grid.texel(records.uv[s])];
         let (wi, wo) = (Vec3::from_f64(records.wi[s]), Vec3::from_f64(records.wo[s]));
-        let (wi_local, wo_local, cosine_ratio) = match lobe.normal {
+        let (wi_local, wo_local, cosine_ratio) = match &lobe.frame {
             None => (wi, wo, 1.0),
-            Some(n) => {
-                let (i, o) = (to_shading_frame(n, wi), to_shading_frame(n, wo));
+            Some(frame) => {
+                let (i, o) = (frame.local(wi), frame.local(wo));
                 if i.z <= 0.0 || o.z <= 0.0 {
                     return Rgb([0.0; 3]);
                 }
