@@ -83,6 +83,28 @@ impl Real for f32 {
     fn erfc(self) -> Self {
         libm::erfcf(self)
     }
+    /// Compared in `f32`, so SIMD lanes need no conversion to `f64`. The same result as the
+    /// default: where `lo` is not an `f32`, a value equal to its rounding `lo as f32` is
+    /// returned either way.
+    #[inline]
+    fn max_c(self, lo: f64) -> Self {
+        let lo = lo as f32;
+        if self > lo {
+            self
+        } else {
+            lo
+        }
+    }
+    /// As [`Real::max_c`] for `f32`.
+    #[inline]
+    fn min_c(self, hi: f64) -> Self {
+        let hi = hi as f32;
+        if self < hi {
+            self
+        } else {
+            hi
+        }
+    }
 }
 
 impl Real for Dual64 {

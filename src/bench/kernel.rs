@@ -11,6 +11,7 @@
 //! | `batch_f64_ns_per_eval` | the same with `f64` lanes |
 //! | `kulla_conty_ns_per_eval`, `kulla_conty_f64_ns_per_eval` | the same two for `kulla-conty` (single lobe and compensation lobe, [`Lobe::of`]) at the same material: the cost of its added lobe in the kernel |
 //! | `fast_msx_ns_per_eval`, `fast_msx_f64_ns_per_eval` | the same two for `fast-msx` (single lobe and its second-bounce lobe) |
+//! | `tangents_ns_per_eval`, `tangents_f64_ns_per_eval` | the same two for `single` with the derivatives by roughness, Fresnel and albedo ([`BatchRecords::render_with_tangents`]): what a gradient-based fit evaluates |
 //! | `batch_prepare_ns_per_eval` | thread CPU time per pair of [`BatchRecords::new`]: the one-off cost, for comparison with kernels that take raw direction pairs |
 //! | `speedup` | `scalar_ns_per_eval / batch_ns_per_eval` |
 
@@ -42,6 +43,8 @@ pub struct KernelRow {
     pub fast_msx_ns_per_eval: f64,
     pub fast_msx_f64_ns_per_eval: f64,
     pub kulla_conty_f64_ns_per_eval: f64,
+    pub tangents_ns_per_eval: f64,
+    pub tangents_f64_ns_per_eval: f64,
     pub batch_prepare_ns_per_eval: f64,
     pub speedup: f64,
 }
@@ -103,22 +106,28 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
                 black_box(brdf.eval(wi, wo, &mut rng));
             }
         });
-        let batch_ns = |model: Model, precision: Precision| {
+        let batch_ns = |model: Model, precision: Precision, tangents: bool| {
             let batch = BatchRecords::for_model(&records, &all, precision, model);
             let lobe = Lobe::of(model, &single).expect("a model the kernel serves");
             per_pair(pairs, seconds, || {
-                black_box(batch.render(black_box(lobe), [0.0; 3]));
+                if tangents {
+                    black_box(batch.render_with_tangents(black_box(lobe), [0.0; 3]));
+                } else {
+                    black_box(batch.render(black_box(lobe), [0.0; 3]));
+                }
             })
         };
-        let [batch_ns, batch_f64_ns, kulla_conty_ns, kulla_conty_f64_ns, fast_msx_ns, fast_msx_f64_ns] = [
-            (Model::Single, Precision::F32),
-            (Model::Single, Precision::F64),
-            (Model::KullaConty, Precision::F32),
-            (Model::KullaConty, Precision::F64),
-            (Model::FastMsx, Precision::F32),
-            (Model::FastMsx, Precision::F64),
+        let [batch_ns, batch_f64_ns, kulla_conty_ns, kulla_conty_f64_ns, fast_msx_ns, fast_msx_f64_ns, tangents_ns, tangents_f64_ns] = [
+            (Model::Single, Precision::F32, false),
+            (Model::Single, Precision::F64, false),
+            (Model::KullaConty, Precision::F32, false),
+            (Model::KullaConty, Precision::F64, false),
+            (Model::FastMsx, Precision::F32, false),
+            (Model::FastMsx, Precision::F64, false),
+            (Model::Single, Precision::F32, true),
+            (Model::Single, Precision::F64, true),
         ]
-        .map(|(model, precision)| batch_ns(model, precision));
+        .map(|(model, precision, tangents)| batch_ns(model, precision, tangents));
         let prepare = per_pair(pairs, seconds, || {
             black_box(BatchRecords::new(black_box(&records), &all));
         });
@@ -131,6 +140,8 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
             kulla_conty_f64_ns_per_eval: kulla_conty_f64_ns,
             fast_msx_ns_per_eval: fast_msx_ns,
             fast_msx_f64_ns_per_eval: fast_msx_f64_ns,
+            tangents_ns_per_eval: tangents_ns,
+            tangents_f64_ns_per_eval: tangents_f64_ns,
             batch_prepare_ns_per_eval: prepare,
             speedup: scalar / batch_ns,
         }

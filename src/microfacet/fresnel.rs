@@ -75,6 +75,71 @@ pub fn conductor<T: Real>(c: T, eta: T, k: T) -> T {
     n1 * (d2 + n2) / (T::c(2.0) * d1 * d2)
 }
 
+/// [`conductor`] and its derivatives by `eta` and by `k`, `[F, dF/deta, dF/dk]`, derived by
+/// hand so that SIMD lanes evaluate them without dual numbers (the batch kernel's gradient
+/// pass, [`crate::render::batch`]). With `A = a^2 + b^2`: `dA = d(t0^2 + 4 eta^2 k^2) / (2A)`,
+/// `da = (dA + dt0) / (4a)`, `d b^2 = (dA - dt0) / 2`; then the four sums of squares by the
+/// chain rule, and `dF = (dn1 (d2 + n2) + n1 (dd2 + dn2)) / (2 d1 d2) - F (dd1 / d1 + dd2 / d2)`.
+/// Where [`conductor`] floors a square root's argument, the derivative through it is zero, as a
+/// dual number's is.
+#[inline(always)]
+pub fn conductor_with_slopes<T: Real>(c: T, eta: T, k: T) -> [T; 3] {
+    let (zero, one, two) = (T::zero(), T::one(), T::c(2.0));
+    let above = |x: T, floor: f64, slope: [T; 2]| {
+        if x.re64() > floor {
+            slope
+        } else {
+            [zero; 2]
+        }
+    };
+    let c2 = c * c;
+    let s2 = one - c2;
+    let (eta2, k2) = (eta * eta, k * k);
+    let t0 = eta2 - k2 - one + c2;
+    let dt0 = [two * eta, -(two * k)];
+    let radicand = t0 * t0 + T::c(4.0) * eta2 * k2;
+    let a2pb2 = radicand.max_c(f64::MIN_POSITIVE).sqrt();
+    let half_inv = T::c(0.5) / a2pb2;
+    let d_a2pb2 = above(
+        radicand,
+        f64::MIN_POSITIVE,
+        [
+            (t0 * dt0[0] + T::c(4.0) * eta * k2) * two * half_inv,
+            (t0 * dt0[1] + T::c(4.0) * eta2 * k) * two * half_inv,
+        ],
+    );
+    let a_radicand = (a2pb2 + t0) * T::c(0.5);
+    let a = a_radicand.max_c(f64::MIN_POSITIVE).sqrt();
+    let quarter_inv_a = T::c(0.25) / a;
+    let da = above(
+        a_radicand,
+        f64::MIN_POSITIVE,
+        [0, 1].map(|i| (d_a2pb2[i] + dt0[i]) * quarter_inv_a),
+    );
+    let b2_unclamped = (a2pb2 - t0) * T::c(0.5);
+    let b2 = b2_unclamped.max_c(0.0);
+    let db2 = above(
+        b2_unclamped,
+        0.0,
+        [0, 1].map(|i| (d_a2pb2[i] - dt0[i]) * T::c(0.5)),
+    );
+    let (amc, apc) = (a - c, a + c);
+    let (n1, d1) = (amc.sq() + b2, apc.sq() + b2);
+    let (ac, b2c2) = (a * c, b2 * c2);
+    let (acms, acps) = (ac - s2, ac + s2);
+    let (n2, d2) = (acms.sq() + b2c2, acps.sq() + b2c2);
+    let inv = one / (two * d1 * d2);
+    let value = n1 * (d2 + n2) * inv;
+    let slope = |i: usize| {
+        let dn1 = two * amc * da[i] + db2[i];
+        let dd1 = two * apc * da[i] + db2[i];
+        let dn2 = two * acms * c * da[i] + c2 * db2[i];
+        let dd2 = two * acps * c * da[i] + c2 * db2[i];
+        (dn1 * (d2 + n2) + n1 * (dd2 + dn2)) * inv - value * (dd1 * d2 + d1 * dd2) * two * inv
+    };
+    [value, slope(0), slope(1)]
+}
+
 /// Exact unpolarised reflectance of a dielectric interface with relative index `eta`
 /// (transmitted over incident medium); 1 under total internal reflection.
 #[inline]
@@ -207,6 +272,49 @@ mod tests {
                 let a = conductor(c, eta, k);
                 let b = conductor_complex(c, eta, k);
                 assert!((a - b).abs() < 1e-12, "eta {eta} k {k} cos {c}: {a} vs {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn conductor_slopes_equal_its_dual_number_derivatives() {
+        use num_dual::Dual64;
+        // Metals, a dielectric without absorption below and beyond its critical angle (where
+        // `conductor` floors `a`), an index-matched interface, and extreme indices.
+        let indices = [
+            (0.2, 3.9),
+            (1.1, 2.1),
+            (0.05, 0.5),
+            (2.5, 0.0),
+            (0.5, 0.0),
+            (1.0, 0.0),
+            (0.27, 2.78),
+            (9.0, 20.0),
+            (1e-3, 1e-3),
+            (50.0, 1e-4),
+        ];
+        for &(eta, k) in &indices {
+            for i in 0..=40 {
+                let c = (i as f64 / 40.0).max(1e-7);
+                let [value, by_eta, by_k] = conductor_with_slopes(c, eta, k);
+                let x = Dual64::from_re(c);
+                let dual_eta = conductor(x, Dual64::from_re(eta).derivative(), Dual64::from_re(k));
+                let dual_k = conductor(x, Dual64::from_re(eta), Dual64::from_re(k).derivative());
+                let close = |a: f64, b: f64| (a - b).abs() <= 1e-10 * (1.0 + b.abs());
+                assert!(
+                    close(value, conductor(c, eta, k)),
+                    "eta {eta} k {k} cos {c}"
+                );
+                assert!(
+                    close(by_eta, dual_eta.eps),
+                    "eta {eta} k {k} cos {c}: d/deta {by_eta} vs {}",
+                    dual_eta.eps
+                );
+                assert!(
+                    close(by_k, dual_k.eps),
+                    "eta {eta} k {k} cos {c}: d/dk {by_k} vs {}",
+                    dual_k.eps
+                );
             }
         }
     }
