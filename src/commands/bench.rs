@@ -447,7 +447,7 @@ fn maps_set(path: &Path, fit: &FitOptionArgs, max_bases: usize) -> Result<MapsSe
     let maps = MapsArgs {
         maps: true,
         texels: None,
-        normals: false,
+        normals: crate::maps::fit::Normals::Off,
         bases: max_bases,
         holdout_photo: Some(last),
     };

@@ -11,7 +11,7 @@ use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::fit_model;
 use crate::fit::point::exposure::exposed_records;
-use crate::maps::fit::{fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions};
+use crate::maps::fit::{fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions, Normals};
 use crate::maps::render::render_maps;
 use crate::maps::{MaterialMaps, TexelGrid};
 use crate::shading::{PhotoSpan, ShadingRecords};
@@ -29,9 +29,11 @@ pub struct MapsArgs {
     /// in the sample's proportions).
     #[arg(long, value_parser = parse_texels, requires = "maps")]
     pub texels: Option<TexelGrid>,
-    /// Fit a shading normal per texel too.
-    #[arg(long, requires = "maps")]
-    pub normals: bool,
+    /// Fit a shading normal per texel too: `--normals` (or `=on`), `=off`, or `=auto` to fit
+    /// both and keep normals where they predict the validation photo better by more than 2%.
+    #[arg(long, value_enum, num_args = 0..=1, require_equals = true,
+          default_value = "off", default_missing_value = "on", requires = "maps")]
+    pub normals: Normals,
     /// Most basis materials tried; the number is chosen by the error of a validation photo.
     #[arg(long, default_value_t = 4, requires = "maps",
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=12))]

@@ -16,7 +16,7 @@
 //! | 2 | noise level | `sigma^2 = sum r^2 / (residuals - parameters)` of stage 1, so the data term is a Gaussian log-likelihood and the prior's units are those of the coordinates |
 //! | 3 | `K` basis materials | k-means over the texels' specular coordinates (`ln alpha`, `logit F0`), each coordinate weighted by its Gauss-Newton precision `(J^T J)_jj` (a texel's diagonal Laplace approximation), so poorly seen texels hardly move the bases and are assigned by what is seen of them |
 //! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; each texel as either kind (a texel of the basis's other kind takes only its roughness), from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own |
-//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels; the fewest bases within 2% of the best error are kept, with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10) |
+//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels; the fewest bases within 2% of the best error are kept, with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
 //!
 //! Texels are independent given the bases, so each is a small dense problem (4 to 9
 //! coordinates: `ln alpha`, `logit F0` RGB unless the Fresnel is known, `logit diffuse` RGB,
@@ -117,6 +117,21 @@ const ROUGHNESS_FLOORS: [Option<f64>; 10] = [
     Some(0.8),
 ];
 
+/// Whether a maps fit has a shading normal per texel (`fit --maps --normals[=on|off|auto]`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Normals {
+    /// Geometric normal everywhere.
+    #[default]
+    Off,
+    /// A normal per texel.
+    On,
+    /// Both fitted in stage 5, on the photos other than the validation photo; the maps get
+    /// normals when, at its best number of bases, a fit with normals predicts the validation
+    /// photo better than one without by more than [`PARSIMONY`] (without a validation photo:
+    /// none).
+    Auto,
+}
+
 /// What a maps fit searches.
 #[derive(Clone, Debug)]
 pub struct MapsFitOptions {
@@ -128,8 +143,8 @@ pub struct MapsFitOptions {
     pub known_fresnel: Option<FresnelSpec>,
     /// Texel grid over the sample.
     pub grid: TexelGrid,
-    /// Fit a shading normal per texel.
-    pub normals: bool,
+    /// Fit a shading normal per texel: never, always, or where the validation photo says so.
+    pub normals: Normals,
     /// Largest number of basis materials tried.
     pub max_bases: usize,
     /// The photo left out to choose the number of bases (index into the records' photos);
@@ -165,6 +180,13 @@ pub struct BasisTrial {
     pub unfloored_validation_error: f64,
 }
 
+/// The two validation errors that choose whether a maps fit has normals ([`Normals::Auto`]).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct NormalsTrial {
+    pub without: f64,
+    pub with: f64,
+}
+
 /// A maps fit: the maps and how they were found.
 #[derive(Clone, Debug, Serialize)]
 pub struct MapsFit {
@@ -176,6 +198,12 @@ pub struct MapsFit {
     /// The least roughness of any texel, chosen with the bases by the validation photo
     /// (`null`: none, and always without a validation photo).
     pub roughness_floor: Option<f64>,
+    /// Whether the maps have a shading normal per texel.
+    pub normals: bool,
+    /// With `--normals=auto`: the least validation error over the numbers of bases without
+    /// and with normals, which decided `normals`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub normals_trial: Option<NormalsTrial>,
     /// Noise level of the photos, linear radiance units (stage 2).
     pub noise_sigma: f64,
     /// Relative RMS error over the fitted pixels.
@@ -767,18 +795,32 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         height: options.height,
         ..ParamSpace::plain(options.model)
     };
-    let directions = prepared_directions(&space, options.normals, records);
-    let model = TexelModel {
+    let candidates: &[bool] = match options.normals {
+        Normals::Off => &[false],
+        Normals::On => &[true],
+        Normals::Auto => &[false, true],
+    };
+    // Without normals the directions are the same at every evaluation ([`prepared_directions`]).
+    let directions = candidates
+        .contains(&false)
+        .then(|| prepared_directions(&space, false, records))
+        .flatten();
+    let model_with = |normals: bool| TexelModel {
         space,
-        normals: options.normals,
+        normals,
         records,
-        lobe_directions: directions.as_deref(),
+        lobe_directions: if normals { None } else { directions.as_deref() },
     };
-    let trials = match options.validation_photo {
-        Some(_) if options.max_bases > 1 => options.max_bases,
-        _ => 0,
+    let validation_photo = options
+        .validation_photo
+        .filter(|_| options.max_bases > 1 || candidates.len() > 1);
+    let trials_each = options.max_bases + 1;
+    let stage5 = if validation_photo.is_some() {
+        candidates.len() * trials_each
+    } else {
+        0
     };
-    let mut progress = Progress::new("maps fit", (trials + 1 + 2) as u64);
+    let mut progress = Progress::new("maps fit", (stage5 + 2) as u64);
     let mut step = 0u64;
     let mut tick = |what: &str| {
         step += 1;
@@ -787,61 +829,41 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         }
     };
 
-    // Stage 5: the number of bases, by a validation photo, on every other texel of every
-    // other row (a quarter of the work; the bases are global, so a texel sample finds them).
+    // Stage 5: the number of bases (and, with `--normals=auto`, whether the texels have
+    // normals), by a validation photo.
     let mut basis_trials = Vec::new();
-    let (mut bases, mut roughness_floor) = (options.max_bases, None);
-    if let (Some(photo), true) = (options.validation_photo, trials > 0) {
-        let training = records.restricted_to_photos(|i| i != photo);
-        // The same sub-samples with other weights: the same prepared directions.
-        let held_out = TexelModel {
-            records: &training,
-            ..model
-        };
-        let blocks = TexelBlocks::new(&training, options.grid, 2);
-        let sampled = TexelBlocks::new(records, options.grid, 2);
-        let validation: Vec<usize> = sampled
-            .pixels
+    let (mut bases, mut roughness_floor, mut normals) = (options.max_bases, None, candidates[0]);
+    let mut normals_trial = None;
+    if let Some(photo) = validation_photo {
+        let chosen: Vec<(Vec<BasisTrial>, usize)> = candidates
             .iter()
-            .copied()
-            .filter(|&p| records.photos[photo].pixels().contains(&p))
+            .map(|&normals| {
+                let trials = validated_bases(&model_with(normals), options, photo, &mut tick);
+                let chosen = fewest_good_bases(&trials);
+                (trials, chosen)
+            })
             .collect();
-        let first = independent_texels(&held_out, &blocks);
-        tick("texels alone (choosing K)");
-        for k in 1..=options.max_bases {
-            let fits = basis_fits(&held_out, &blocks, &first, k);
-            let error_at = |floor: Option<f64>| {
-                let texels = with_roughness_floor(&fits.texels, floor);
-                let predicted = maps_prediction(&model, &texels, options.grid, &validation);
-                relative_error(&predicted, records, &validation)
-            };
-            let errors: Vec<(Option<f64>, f64)> = ROUGHNESS_FLOORS
+        // Each family at its best number of bases: whether normals help is a question apart
+        // from how many bases each needs.
+        let error = |(trials, _): &(Vec<BasisTrial>, usize)| {
+            trials
                 .iter()
-                .map(|&floor| (floor, error_at(floor)))
-                .collect();
-            let (roughness_floor, error) = *errors
-                .iter()
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .expect("floors to try");
-            tick(&format!("{k} bases: validation error {error:.4}"));
-            basis_trials.push(BasisTrial {
-                bases: k,
-                roughness_floor,
-                validation_error: error,
-                // `ROUGHNESS_FLOORS[0]` is no floor.
-                unfloored_validation_error: errors[0].1,
-            });
-        }
-        let best = basis_trials
-            .iter()
-            .map(|t| t.validation_error)
-            .fold(f64::INFINITY, f64::min);
-        let chosen = basis_trials
-            .iter()
-            .find(|t| t.validation_error <= (1.0 + PARSIMONY) * best)
-            .expect("the best trial is within its own margin");
-        (bases, roughness_floor) = (chosen.bases, chosen.roughness_floor);
+                .map(|t| t.validation_error)
+                .fold(f64::INFINITY, f64::min)
+        };
+        let pick = if chosen.len() == 2 {
+            let (without, with) = (error(&chosen[0]), error(&chosen[1]));
+            normals_trial = Some(NormalsTrial { without, with });
+            usize::from(with * (1.0 + PARSIMONY) < without)
+        } else {
+            0
+        };
+        normals = candidates[pick];
+        let (trials, k) = chosen.into_iter().nth(pick).expect("a candidate picked");
+        (bases, roughness_floor) = (trials[k].bases, trials[k].roughness_floor);
+        basis_trials = trials;
     }
+    let model = model_with(normals);
     let blocks = TexelBlocks::new(records, options.grid, 1);
     let first = independent_texels(&model, &blocks);
     tick("texels alone");
@@ -863,6 +885,8 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         bases: fits.bases,
         basis_trials,
         roughness_floor,
+        normals,
+        normals_trial,
         noise_sigma: first.sigma2.sqrt(),
         train_error,
         texels_seen: (0..options.grid.len())
@@ -871,6 +895,75 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         seconds: start.elapsed().as_secs_f64(),
         labels: fits.labels,
     })
+}
+
+/// Stage 5 for one model: fitted on every photo but `photo`, on every other texel of every
+/// other row (a quarter of the work; the bases are global, so a texel sample finds them),
+/// each number of bases up to `options.max_bases` with the roughness floor that predicts
+/// `photo` best.
+fn validated_bases(
+    model: &TexelModel,
+    options: &MapsFitOptions,
+    photo: usize,
+    tick: &mut impl FnMut(&str),
+) -> Vec<BasisTrial> {
+    let records = model.records;
+    let training = records.restricted_to_photos(|i| i != photo);
+    // The same sub-samples with other weights: the same prepared directions.
+    let held_out = TexelModel {
+        records: &training,
+        ..*model
+    };
+    let blocks = TexelBlocks::new(&training, options.grid, 2);
+    let sampled = TexelBlocks::new(records, options.grid, 2);
+    let validation: Vec<usize> = sampled
+        .pixels
+        .iter()
+        .copied()
+        .filter(|&p| records.photos[photo].pixels().contains(&p))
+        .collect();
+    let normals = if model.normals { ", normals" } else { "" };
+    let first = independent_texels(&held_out, &blocks);
+    tick(&format!("texels alone (choosing K{normals})"));
+    (1..=options.max_bases)
+        .map(|k| {
+            let fits = basis_fits(&held_out, &blocks, &first, k);
+            let error_at = |floor: Option<f64>| {
+                let texels = with_roughness_floor(&fits.texels, floor);
+                let predicted = maps_prediction(model, &texels, options.grid, &validation);
+                relative_error(&predicted, records, &validation)
+            };
+            let errors: Vec<(Option<f64>, f64)> = ROUGHNESS_FLOORS
+                .iter()
+                .map(|&floor| (floor, error_at(floor)))
+                .collect();
+            let (roughness_floor, error) = *errors
+                .iter()
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .expect("floors to try");
+            tick(&format!("{k} bases{normals}: validation error {error:.4}"));
+            BasisTrial {
+                bases: k,
+                roughness_floor,
+                validation_error: error,
+                // `ROUGHNESS_FLOORS[0]` is no floor.
+                unfloored_validation_error: errors[0].1,
+            }
+        })
+        .collect()
+}
+
+/// The index of the trial with the fewest bases whose validation error is within
+/// [`PARSIMONY`] of the best.
+fn fewest_good_bases(trials: &[BasisTrial]) -> usize {
+    let best = trials
+        .iter()
+        .map(|t| t.validation_error)
+        .fold(f64::INFINITY, f64::min);
+    trials
+        .iter()
+        .position(|t| t.validation_error <= (1.0 + PARSIMONY) * best)
+        .expect("the best trial is within its own margin")
 }
 
 /// The decrease of a cost with gradient `2 gradient` and Gauss-Newton matrix `2 matrix` (as
@@ -1244,7 +1337,7 @@ fn to_maps(model: &TexelModel, options: &MapsFitOptions, texels: &[TexelFit]) ->
             .is_none()
             .then(|| materials.iter().map(|m| m.fresnel.f0()).collect()),
         roughness: Some(materials.iter().map(|m| m.alpha[0]).collect()),
-        normal: options.normals.then(|| {
+        normal: model.normals.then(|| {
             texels
                 .iter()
                 .map(|f| normal_from_slopes(f.x[base_dim], f.x[base_dim + 1]).re())
