@@ -3,7 +3,8 @@
 # ../shared/data/real (read from there, never copied), fitted on 8 photos at 256x256 with each
 # analytic model, predicting the 9th (photo 8). Prints one line per fit: set, model, held-out
 # relative RMSE over linear unclipped pixels, the naive baseline (the mean of the 8 training
-# photos), their ratio, the chosen number of bases and roughness floor, and the fit's seconds.
+# photos), their ratio, the chosen number of bases and roughness floor, whether the maps have
+# normals (--normals, or --normals=auto's choice), and the fit's seconds.
 # Usage: scripts/maps-real.sh [OUT_DIR] [MODELS] [EXTRA FIT OPTIONS...]
 #   e.g. scripts/maps-real.sh /tmp/maps-real single,kulla-conty --normals
 set -euo pipefail
@@ -19,7 +20,7 @@ fi
 mkdir -p "$out"
 cargo build --release --quiet
 bf=target/release/bouncefit
-printf '%-16s %-12s %9s %9s %6s %5s %6s %7s\n' set model held-out baseline ratio bases floor seconds
+printf '%-16s %-12s %9s %9s %6s %5s %6s %7s %7s\n' set model held-out baseline ratio bases floor normals seconds
 for set in yellow_box real_cards-blue bath_tile; do
   depth=0
   case $set in yellow_box | bath_tile) depth=0.1 ;; esac
@@ -34,7 +35,8 @@ f = json.load(open(path))
 h = f["holdout"]
 print(f'{s:<16} {m:<12} {h["relative_error"]:9.4f} {h["mean_photo_error"]:9.4f} '
       f'{h["relative_error"] / h["mean_photo_error"]:6.3f} {len(f["maps_fit"]["bases"]):5d} '
-      f'{f["maps_fit"]["roughness_floor"] or 0:6.3f} {f["maps_fit"]["seconds"]:7.1f}')
+      f'{f["maps_fit"]["roughness_floor"] or 0:6.3f} {"yes" if f["maps_fit"]["normals"] else "no":>7} '
+      f'{f["maps_fit"]["seconds"]:7.1f}')
 PY
   done
 done
