@@ -487,6 +487,29 @@ impl BatchRecords {
         (values, tangents.expect("asked for"))
     }
 
+    /// The render of the Schlick lobe `single` plus a Lambertian layer of albedo `diffuse` as
+    /// an affine function of F0: per pixel and channel, `[value at F0 = 0, slope by F0]`.
+    /// Schlick's factor `F0 + (1 - F0)(1 - c)^5` (Schlick 1994 eq. 24) is affine in F0, so two
+    /// value passes, at F0 = 0 and F0 = 1, give the slope as their difference (to rounding),
+    /// at about half the cost of the pass with tangents (`bench --quick`'s kernel row: two
+    /// `f64` value passes 19 ns per record against 35 ns). `single`'s own F0 is not read.
+    pub fn render_affine_in_f0(
+        &self,
+        single: &SingleBounce<f64>,
+        diffuse: [f64; 3],
+    ) -> Vec<[[f64; 2]; 3]> {
+        let at = |f0: f64| SingleBounce {
+            fresnel: Fresnel::Schlick { f0: Rgb::splat(f0) },
+            ..*single
+        };
+        let (zero, one) = (at(0.0), at(1.0));
+        let (zero, one) = (self.render(&zero, diffuse), self.render(&one, diffuse));
+        zero.iter()
+            .zip(&one)
+            .map(|(a, b)| [0, 1, 2].map(|c| [a[c], b[c] - a[c]]))
+            .collect()
+    }
+
     fn run(
         &self,
         lobe: &Lobe,

@@ -281,6 +281,20 @@ impl<'a> Objective<'a> {
         (values, t)
     }
 
+    /// [`Objective::batch_shared`] as an affine function of a Schlick F0, per pixel and channel
+    /// `[value at F0 = 0, slope]` ([`BatchRecords::render_affine_in_f0`]): what the projection
+    /// needs, from two value passes instead of the pass with tangents.
+    fn batch_shared_affine(&self, surface: &Surface<f64>, anchors: &Anchors) -> Vec<[[f64; 2]; 3]> {
+        let batch = self.batch();
+        let mut parts = batch.render_affine_in_f0(&surface.single, surface.diffuse);
+        for (k, corners) in anchors.corners.iter().enumerate() {
+            if corners.is_none() {
+                parts[k] = [0, 1, 2].map(|c| [surface.diffuse[c] * batch.lambert()[k][c], 0.0]);
+            }
+        }
+        parts
+    }
+
     /// The per-seed part of a render through `anchors` at `seed`, unexposed: the interpolated
     /// multiple-bounce term at the pixels with anchors and the whole specular value (no
     /// diffuse) at the pixels without. The interpolated term is the same at every sub-sample of
@@ -335,7 +349,7 @@ impl<'a> Objective<'a> {
     /// values and the pixels without anchors, with the anchors and each pixel's white
     /// Lambertian radiance that interpolate them ([`interpolate`]), so that a caller can
     /// combine several points' anchor values before it interpolates once
-    /// ([`super::projection`]); and the shared part with its Fresnel slope when `shared`.
+    /// ([`super::projection`]); and the shared part as an affine function of F0 when `shared`.
     /// `None` where the plan does not interpolate, or where the space fits an exposure (these
     /// parts are unexposed).
     pub fn anchored_values(&self, x: &[f64], shared: bool) -> Option<AnchoredRender<'_>> {
@@ -352,10 +366,7 @@ impl<'a> Objective<'a> {
         Some(AnchoredRender {
             anchors,
             lambert: self.batch().lambert(),
-            shared: shared.then(|| {
-                let (values, tangents) = self.batch_shared(&surface, anchors, true);
-                (values, tangents.expect("asked for").fresnel_a)
-            }),
+            shared: shared.then(|| self.batch_shared_affine(&surface, anchors)),
             streams: self
                 .seeds
                 .iter()
@@ -382,10 +393,8 @@ impl<'a> Objective<'a> {
         };
         let lobe = Lobe::of(Model::KullaConty, &surface.single)?;
         let batch = self.batch();
-        let (single, tangents) = batch.render_with_tangents(&surface.single, [0.0; 3]);
         Some(CompensationParts {
-            single,
-            single_slope: tangents.fresnel_a,
+            single: batch.render_affine_in_f0(&surface.single, [0.0; 3]),
             whole: batch.render(lobe, [0.0; 3]),
         })
     }
@@ -785,19 +794,20 @@ pub struct AnchoredRender<'o> {
     pub anchors: &'o Anchors,
     /// Per pixel of the list: its white Lambertian radiance.
     pub lambert: &'o [[f64; 3]],
-    /// The part every seed shares ([`crate::render::SplitRender::shared`]) and its derivative
-    /// by the first Fresnel parameter of each channel, when asked for.
-    pub shared: Option<(Vec<[f64; 3]>, Vec<[f64; 3]>)>,
+    /// The part every seed shares ([`crate::render::SplitRender::shared`]) as an affine
+    /// function of a Schlick F0, `[value at F0 = 0, slope]` per pixel and channel, when asked
+    /// for.
+    pub shared: Option<Vec<[[f64; 2]; 3]>>,
     /// Per seed: the anchors' values and the pixels without anchors.
     pub streams: Vec<AnchoredValues<f64>>,
 }
 
 /// The parts of a `kulla-conty` render ([`Objective::compensation_parts`]), per loss pixel.
 pub struct CompensationParts {
-    pub single: Vec<[f64; 3]>,
-    /// The derivative of `single` by the first Fresnel parameter (Schlick F0) of each channel.
-    pub single_slope: Vec<[f64; 3]>,
-    /// Single bounce and compensation lobe.
+    /// The single bounce as an affine function of a Schlick F0: `[value at F0 = 0, slope]`
+    /// per channel.
+    pub single: Vec<[[f64; 2]; 3]>,
+    /// Single bounce and compensation lobe, at the F0 of the point asked for.
     pub whole: Vec<[f64; 3]>,
 }
 

@@ -4,16 +4,16 @@
 //!
 //! | piece | how |
 //! | --- | --- |
-//! | dependence on F0 | each pixel's prediction is a polynomial in a grey Schlick F0 of degree [`fresnel_degree`]: 1 for `single` (Schlick is linear in F0), 2 for `fast-msx` (`F^2`, eq. 19) and `turquin` (`f_single (1 + F0 k)`); the others are rational (`kulla-conty`'s `F_ms`) or long polynomials (`tabulated`'s per-order weights, one Fresnel factor per bounce of a walk) and get degree 4 |
-//! | basis | the model rendered at the Chebyshev-Lobatto nodes of F0 in [0, 1] (with the fit's common random numbers), converted to monomial coefficients per pixel |
+//! | dependence on F0 | each pixel's prediction is a polynomial in a grey Schlick F0 of degree [`fresnel_degree`]: 1 for `single` (Schlick is linear in F0), 2 for `fast-msx` (`F^2`, eq. 19) and `turquin` (`f_single (1 + F0 k)`); `kulla-conty` is `A + B F0 + W s(F0)`, its lobe an image `W` times the colour `s = F_ms / (pi (1 - E_avg))` (Kulla & Conty 2017), which is rational in F0; the others are long polynomials (`tabulated`'s per-order weights, one Fresnel factor per bounce of a walk) and get degree 4 |
+//! | basis | monomials: the model rendered at the Chebyshev-Lobatto nodes of F0 in [0, 1] (with the fit's common random numbers), converted to monomial coefficients per pixel; `kulla-conty`: `1, F0, s(F0)`, with `A`, `B` from two value passes of the single bounce and `W` from one of the whole lobe |
 //! | diffuse | linear: the white Lambertian image [`crate::render::lambertian_pixels`] |
 //! | solve per channel | the weighted squared error `sum v (P(F0) + rho d - t)^2` from moment sums: `rho` in closed form, clamped to [0, 1] (non-negative least squares in one variable); `F0` by a scan of 201 points and golden-section refinement |
 //! | stochastic models | the objective's two renders on independent streams give two polynomials `P1`, `P2` per pixel, and the moments are those of the pair loss `sum v (P1 + rho d - t)(P2 + rho d - t)` ([`crate::loss::Loss::pair_value`]): `sum v A1_j A2_k` symmetrised, `sum v (A1_j + A2_j)/2 t` |
 //! | losses | those that are weighted squared errors ([`crate::loss::Loss::quadratic_weights`]): `l2`, `relative-l2` |
 //!
-//! For degree-1 and degree-2 models the projected loss is exact; for the others it is a
-//! polynomial approximation in F0, so the fitter always finishes with a joint search over all
-//! coordinates from the projected optimum.
+//! For degree-1 and degree-2 models and `kulla-conty` the projected loss is exact; for the
+//! others it is a polynomial approximation in F0. The fitter always finishes with a joint
+//! search over all coordinates from the projected optimum.
 
 use super::objective::{interpolate, Objective};
 use super::params::{logit, sigmoid, FresnelFamily};
@@ -65,16 +65,19 @@ enum NodeRenders<'o> {
         /// `[stream]`: the pixels without anchors in increasing order, with their
         /// coefficients laid out as `multi`.
         exact: Vec<Vec<(usize, [f64; 3 * MAX_NODES])>>,
+        /// Number of F0 nodes (the polynomial's degree plus one).
+        nodes: usize,
     },
     /// `kulla-conty`: the single bounce's two coefficients per pixel, and the compensation
     /// lobe as an image `W` that does not depend on F0 times a colour `s(F0)` that depends
-    /// on nothing else: `A + B F0 + W s(F0)`, with `s` through the nodes as the whole renders
-    /// would give it ([`Objective::compensation_parts`]).
+    /// on nothing else: `A + B F0 + W s(F0)` ([`Objective::compensation_parts`]), exact in the
+    /// basis `1, F0, s(F0)`.
     Compensated {
         single: Vec<[[f64; 2]; 3]>,
         image: Vec<[f64; 3]>,
-        /// Monomial coefficients of the interpolant of `s` through the nodes, per channel.
-        colour: [[f64; MAX_NODES]; 3],
+        /// `s` per channel at a grey F0: Kulla & Conty's `F_ms / (pi (1 - E_avg))` at the
+        /// solve's roughness.
+        colour: Box<dyn Fn(f64) -> [f64; 3] + Sync + 'o>,
     },
 }
 
@@ -88,7 +91,36 @@ impl NodeRenders<'_> {
         }
     }
 
-    /// Monomial coefficients in F0 of pixel `p`'s prediction in `stream`, per channel.
+    /// Number of basis functions of F0 ([`NodeRenders::basis`]).
+    fn terms(&self) -> usize {
+        match self {
+            NodeRenders::Whole { lagrange, .. } => lagrange.len(),
+            NodeRenders::Anchored { nodes, .. } => *nodes,
+            NodeRenders::Compensated { .. } => 3,
+        }
+    }
+
+    /// The basis functions of F0 at `f` for `channel`: monomials `1, f, ..., f^(terms - 1)`,
+    /// or `1, f, s(f)` for [`NodeRenders::Compensated`].
+    fn basis(&self, channel: usize, f: f64) -> [f64; MAX_NODES] {
+        let mut phi = [0.0; MAX_NODES];
+        match self {
+            NodeRenders::Compensated { colour, .. } => {
+                phi[..3].copy_from_slice(&[1.0, f, colour(f)[channel]]);
+            }
+            _ => {
+                let mut power = 1.0;
+                for phi in phi.iter_mut().take(self.terms()) {
+                    *phi = power;
+                    power *= f;
+                }
+            }
+        }
+        phi
+    }
+
+    /// Coefficients of pixel `p`'s prediction in `stream` in [`NodeRenders::basis`], per
+    /// channel.
     fn coefficients(&self, stream: usize, p: usize) -> [[f64; MAX_NODES]; 3] {
         let mut a = [[0.0; MAX_NODES]; 3];
         match self {
@@ -101,6 +133,7 @@ impl NodeRenders<'_> {
                 lambert,
                 multi,
                 exact,
+                ..
             } => {
                 let own = match &anchors.corners[p] {
                     Some(corners) => interpolate(corners, &multi[stream], &lambert[p]),
@@ -120,17 +153,10 @@ impl NodeRenders<'_> {
                     a[1] += c1;
                 }
             }
-            NodeRenders::Compensated {
-                single,
-                image,
-                colour,
-            } => {
+            NodeRenders::Compensated { single, image, .. } => {
                 for (c, a) in a.iter_mut().enumerate() {
-                    for (a, s) in a.iter_mut().zip(colour[c]) {
-                        *a = image[p][c] * s;
-                    }
-                    a[0] += single[p][c][0];
-                    a[1] += single[p][c][1];
+                    let [intercept, slope] = single[p][c];
+                    a[..3].copy_from_slice(&[intercept, slope, image[p][c]]);
                 }
             }
         }
@@ -182,15 +208,16 @@ impl Moments {
         self
     }
 
-    /// `(squared error, rho)` at F0 = `f`, with rho optimal in [0, 1].
-    fn error(&self, f: f64) -> (f64, f64) {
-        let powers: Vec<f64> = (0..self.at.len()).map(|j| f.powi(j as i32)).collect();
+    /// `(squared error, rho)` at F0 = `f`, with rho optimal in [0, 1]; `basis` gives the
+    /// basis functions at `f` ([`NodeRenders::basis`]).
+    fn error(&self, f: f64, basis: &impl Fn(f64) -> [f64; MAX_NODES]) -> (f64, f64) {
+        let phi = basis(f);
         let (mut pp, mut pt, mut pd) = (0.0, 0.0, 0.0);
-        for j in 0..powers.len() {
-            pt += powers[j] * self.at[j];
-            pd += powers[j] * self.ad[j];
-            for k in 0..powers.len() {
-                pp += powers[j] * powers[k] * self.aa[j][k];
+        for j in 0..self.at.len() {
+            pt += phi[j] * self.at[j];
+            pd += phi[j] * self.ad[j];
+            for k in 0..self.at.len() {
+                pp += phi[j] * phi[k] * self.aa[j][k];
             }
         }
         let base = pp - 2.0 * pt + self.tt;
@@ -202,10 +229,13 @@ impl Moments {
     }
 
     /// F0 in [0, 1] minimising the error, with its rho and error.
-    fn minimise(&self) -> (f64, f64, f64) {
+    fn minimise(&self, basis: impl Fn(f64) -> [f64; MAX_NODES]) -> (f64, f64, f64) {
         let grid = |i: usize| i as f64 / (F0_SCAN - 1) as f64;
+        let scan: Vec<f64> = (0..F0_SCAN)
+            .map(|i| self.error(grid(i), &basis).0)
+            .collect();
         let best = (0..F0_SCAN)
-            .min_by(|&a, &b| self.error(grid(a)).0.total_cmp(&self.error(grid(b)).0))
+            .min_by(|&a, &b| scan[a].total_cmp(&scan[b]))
             .expect("the scan has points");
         let (mut lo, mut hi) = (
             grid(best.saturating_sub(1)),
@@ -215,7 +245,7 @@ impl Moments {
         for _ in 0..GOLDEN_ITERATIONS {
             let a = hi - ratio * (hi - lo);
             let b = lo + ratio * (hi - lo);
-            if self.error(a).0 < self.error(b).0 {
+            if self.error(a, &basis).0 < self.error(b, &basis).0 {
                 hi = b;
             } else {
                 lo = a;
@@ -224,9 +254,13 @@ impl Moments {
         let candidates = [grid(best), 0.5 * (lo + hi)];
         let f = candidates
             .into_iter()
-            .min_by(|a, b| self.error(*a).0.total_cmp(&self.error(*b).0))
+            .min_by(|a, b| {
+                self.error(*a, &basis)
+                    .0
+                    .total_cmp(&self.error(*b, &basis).0)
+            })
             .expect("two candidates");
-        let (e, rho) = self.error(f);
+        let (e, rho) = self.error(f, &basis);
         (f, rho, e)
     }
 }
@@ -318,10 +352,13 @@ impl<'o, 'r> Projection<'o, 'r> {
         })
     }
 
-    /// Whether the projected loss is exact (a prediction polynomial in F0 of degree at most 2,
-    /// see the module table) rather than a polynomial approximation.
+    /// Whether the projected loss is exact rather than a polynomial approximation (see the
+    /// module table): a prediction polynomial in F0 of degree at most 2, or `kulla-conty`'s
+    /// `A + B F0 + W s(F0)` ([`NodeRenders::Compensated`]; where the plan drops its lobe as
+    /// faint the prediction is the single bounce's, affine in F0).
     pub fn is_exact(&self) -> bool {
-        fresnel_degree(self.objective.space.model) <= 2
+        let model = self.objective.space.model;
+        fresnel_degree(model) <= 2 || model == Model::KullaConty
     }
 
     /// Renders made so far: the cost of the projected search in objective evaluations.
@@ -340,7 +377,7 @@ impl<'o, 'r> Projection<'o, 'r> {
     }
 
     /// The objective's renders at every F0 node ([`NodeRenders`]). Where the plan interpolates
-    /// the multiple-bounce term, the shared part is rendered once, with its derivative by F0,
+    /// the multiple-bounce term, the shared part is rendered once as an affine function of F0,
     /// each node's anchors are evaluated, and the anchors' values are turned into monomial
     /// coefficients before one interpolation per pixel. Interpolating every node's render,
     /// as this did before, and adding the affine part to each, took a third of a `tabulated`
@@ -358,7 +395,6 @@ impl<'o, 'r> Projection<'o, 'r> {
         if let Some(compensated) = self.compensated(roughness) {
             return compensated;
         }
-        let first = self.nodes[0];
         let Some(mut nodes) = self
             .nodes
             .iter()
@@ -368,13 +404,7 @@ impl<'o, 'r> Projection<'o, 'r> {
         else {
             return whole();
         };
-        // Affine in a Schlick F0: its slope is its derivative by F0, from the same pass.
-        let (shared_first, slope) = nodes[0].shared.take().expect("asked for");
-        let shared = shared_first
-            .iter()
-            .zip(&slope)
-            .map(|(a, b)| [0, 1, 2].map(|c| [a[c] - first * b[c], b[c]]))
-            .collect();
+        let shared = nodes[0].shared.take().expect("asked for");
         // Monomial coefficients of per-node values, laid out for `interpolate`.
         let coefficients = |values: &dyn Fn(usize) -> [f64; 3]| {
             let m = monomials(&self.lagrange, values);
@@ -405,46 +435,45 @@ impl<'o, 'r> Projection<'o, 'r> {
             lambert,
             multi,
             exact,
+            nodes: self.nodes.len(),
         }
     }
 
     /// [`NodeRenders::Compensated`] at `roughness`, or `None` where the objective gives no
     /// [`Objective::compensation_parts`]. The image is taken at the last node, where the lobe
-    /// is brightest: `W = (whole - A - B F0) / s(F0)`. Two batch renders (one with tangents)
-    /// instead of one per node: a `kulla-conty` fit of `copper-flash` takes 0.71x the wall
-    /// time of five renders per roughness point (docs/speed.md).
+    /// is brightest: `W = (whole - A - B F0) / s(F0)`. Three batch value passes (the single
+    /// bounce at F0 = 0 and 1, [`crate::render::batch::BatchRecords::render_affine_in_f0`],
+    /// and the whole lobe) instead of five whole renders, one per node (docs/speed.md).
     fn compensated(&self, roughness: &[f64]) -> Option<NodeRenders<'_>> {
         let at = |f: f64| self.coordinates(roughness, [f; 3], [0.0; 3]);
         let last = self.nodes[self.nodes.len() - 1];
         let parts = self.objective.compensation_parts(&at(last))?;
-        let colour_at = |f: f64| {
-            let material = self.objective.space.material(&at(f));
+        let roughness = roughness.to_vec();
+        let colour = move |f: f64| {
+            let x = self.coordinates(&roughness, [f; 3], [0.0; 3]);
+            let material = self.objective.space.material(&x);
             KullaConty::new(material.single::<f64>()).lobe_scale().0
         };
-        let colours: Vec<[f64; 3]> = self.nodes.iter().map(|&f| colour_at(f)).collect();
-        let colour = monomials(&self.lagrange, |node| colours[node]);
-        let s_last = colours[colours.len() - 1];
-        let mut single = Vec::with_capacity(parts.single.len());
-        let mut image = Vec::with_capacity(parts.single.len());
-        for ((value, slope), whole) in parts
+        let s_last = colour(last);
+        let image = parts
             .single
             .iter()
-            .zip(&parts.single_slope)
             .zip(&parts.whole)
-        {
-            single.push([0, 1, 2].map(|c| [value[c] - last * slope[c], slope[c]]));
-            image.push([0, 1, 2].map(|c| {
-                if s_last[c] > 0.0 {
-                    (whole[c] - value[c]) / s_last[c]
-                } else {
-                    0.0
-                }
-            }));
-        }
+            .map(|(single, whole)| {
+                [0, 1, 2].map(|c| {
+                    let [a, b] = single[c];
+                    if s_last[c] > 0.0 {
+                        (whole[c] - (a + b * last)) / s_last[c]
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
         Some(NodeRenders::Compensated {
-            single,
+            single: parts.single,
             image,
-            colour,
+            colour: Box::new(colour),
         })
     }
 
@@ -469,12 +498,11 @@ impl<'o, 'r> Projection<'o, 'r> {
             dd: f64,
             dt: f64,
         }
-        let k = self.nodes.len();
+        let k = renders.terms();
         let streams = renders.streams();
         let mut sums: [Sums; 3] = Default::default();
         for p in pixels {
-            // Monomial coefficients of the stream's polynomial, per channel: the node values
-            // times the inverse Vandermonde matrix.
+            // Coefficients of the stream's prediction in the basis, per channel.
             let a1 = renders.coefficients(0, p);
             let a2 = (streams > 1).then(|| renders.coefficients(streams - 1, p));
             for (c, m) in sums.iter_mut().enumerate() {
@@ -549,7 +577,7 @@ impl<'o, 'r> Projection<'o, 'r> {
             .expect("at least one pixel");
         let (mut f0, mut rho, mut loss) = ([0.0; 3], [0.0; 3], 0.0);
         for (c, m) in moments.iter().enumerate() {
-            let (f, r, e) = m.minimise();
+            let (f, r, e) = m.minimise(|f| renders.basis(c, f));
             (f0[c], rho[c], loss) = (f, r, loss + e);
         }
         (loss, self.coordinates(roughness, f0, rho))
@@ -564,13 +592,15 @@ mod tests {
     use crate::loss::LossKind;
     use crate::render::batch::Precision;
 
-    /// The split forms give the coefficients of the whole renders at every node, to rounding:
-    /// `tabulated` through the anchors (shared part from one render and its F0 derivative,
-    /// anchors' values turned into coefficients before the interpolation) and `kulla-conty`
-    /// as single bounce plus an image times a colour. A wrong slope, node order, channel
-    /// layout or colour moves them by far more (a 0.1% error in the slope fails).
+    /// The split forms predict the whole renders, to rounding: `tabulated` through the
+    /// anchors (shared part from two value passes, anchors' values turned into coefficients
+    /// before the interpolation) at every F0 node, where its polynomial interpolates them;
+    /// `kulla-conty` as single bounce plus an image times a colour at every node and between
+    /// them too, since its basis `1, F0, s(F0)` is exact. A wrong slope, node order, channel
+    /// layout or colour moves them by far more (a 0.1% error in the slope fails), and so
+    /// would a `kulla-conty` basis that only interpolated between the nodes.
     #[test]
-    fn split_node_renders_give_the_whole_renders_coefficients() {
+    fn split_node_renders_predict_the_whole_renders() {
         for model in [Model::Tabulated, Model::KullaConty] {
             check_split_node_renders(model);
         }
@@ -589,34 +619,34 @@ mod tests {
         for alpha in [0.25f64, 0.6, 1.2] {
             let roughness = [alpha.ln()];
             let split = projection.node_renders(&roughness);
-            let expected = match model {
-                Model::Tabulated => matches!(split, NodeRenders::Anchored { .. }),
-                _ => matches!(split, NodeRenders::Compensated { .. }),
+            let exact_between_nodes = match model {
+                Model::Tabulated => {
+                    assert!(matches!(split, NodeRenders::Anchored { .. }));
+                    false
+                }
+                _ => {
+                    assert!(matches!(split, NodeRenders::Compensated { .. }));
+                    true
+                }
             };
-            assert!(expected, "{model} at alpha {alpha} is split");
+            let mut f0s = projection.nodes.clone();
+            if exact_between_nodes {
+                f0s.extend([0.137, 0.55, 0.91]);
+            }
             let at = |f: f64| projection.coordinates(&roughness, [f; 3], [0.0; 3]);
-            let whole = NodeRenders::Whole {
-                renders: projection
-                    .nodes
-                    .iter()
-                    .map(|&f| objective.renders(&at(f)))
-                    .collect(),
-                lagrange: &projection.lagrange,
-            };
-            let pixels = objective.pixel_count();
-            let largest = (0..pixels)
-                .flat_map(|p| whole.coefficients(0, p).into_iter().flatten())
-                .fold(0.0, |m: f64, v| m.max(v.abs()));
-            assert!(largest > 0.0);
-            for p in 0..pixels {
-                let (a, w) = (split.coefficients(0, p), whole.coefficients(0, p));
-                for c in 0..3 {
-                    for j in 0..projection.nodes.len() {
+            for f in f0s {
+                let whole = objective.renders(&at(f)).swap_remove(0);
+                let largest = whole.iter().flatten().fold(0.0, |m: f64, v| m.max(v.abs()));
+                assert!(largest > 0.0);
+                for (p, whole) in whole.iter().enumerate() {
+                    let a = split.coefficients(0, p);
+                    for c in 0..3 {
+                        let phi = split.basis(c, f);
+                        let predicted: f64 = a[c].iter().zip(phi).map(|(a, phi)| a * phi).sum();
                         assert!(
-                            (a[c][j] - w[c][j]).abs() <= 1e-9 * largest,
-                            "{model} alpha {alpha} pixel {p} channel {c} coefficient {j}: {} vs {}",
-                            a[c][j],
-                            w[c][j]
+                            (predicted - whole[c]).abs() <= 1e-9 * largest,
+                            "{model} alpha {alpha} F0 {f} pixel {p} channel {c}: {predicted} vs {}",
+                            whole[c]
                         );
                     }
                 }
@@ -675,12 +705,17 @@ mod tests {
         };
         // Moment sums cancel to ~1e-14 of their size, which limits F0 to ~sqrt(1e-14) = 1e-7
         // (the joint search that follows in a fit refines further).
-        let (f, rho, e) = moments(0.7, 0.2).minimise();
+        let basis = |f: f64| {
+            let mut phi = [0.0; MAX_NODES];
+            phi[..2].copy_from_slice(&[1.0, f]);
+            phi
+        };
+        let (f, rho, e) = moments(0.7, 0.2).minimise(basis);
         assert!(
             (f - 0.7).abs() < 1e-6 && (rho - 0.2).abs() < 1e-6 && e.abs() < 1e-12,
             "{f} {rho} {e}"
         );
-        let (f, _, e) = moments(1.4, 0.0).minimise();
+        let (f, _, e) = moments(1.4, 0.0).minimise(basis);
         assert!(f == 1.0 && e > 0.0, "{f} {e}");
     }
 }
