@@ -164,6 +164,10 @@ fn analytic_fit_and_render_do_not_depend_on_the_thread_count() {
     let dir = tempfile::tempdir().unwrap();
     let set = photo_set(dir.path());
     let fit = assert_fit_deterministic(dir.path(), &set, "single", &["--models", "single"]);
+    // `kulla-conty`'s projection sums its moments over pixel chunks in parallel, in a basis
+    // with a non-polynomial function of F0.
+    let models = ["--models", "kulla-conty"];
+    assert_fit_deterministic(dir.path(), &set, "kulla-conty", &models);
     let renders = [1, 2].map(|threads| {
         let out = dir.path().join(format!("render-{threads}"));
         run_with_threads(
