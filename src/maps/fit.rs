@@ -15,7 +15,7 @@
 //! | 1 | each texel alone, weak prior toward a generic material | Levenberg-Marquardt per texel from three roughness starts (0.05, 0.2, 0.6) |
 //! | 2 | noise level | `sigma^2 = sum r^2 / (residuals - parameters)` of stage 1, so the data term is a Gaussian log-likelihood and the prior's units are those of the coordinates |
 //! | 3 | `K` basis materials | k-means over the texels' specular coordinates (`ln alpha`, `logit F0`), each coordinate weighted by its Gauss-Newton precision `(J^T J)_jj` (a texel's diagonal Laplace approximation), so poorly seen texels hardly move the bases and are assigned by what is seen of them |
-//! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; each texel as either kind (a texel of the basis's other kind takes only its roughness), from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own |
+//! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; each texel as either kind (a texel of the basis's other kind takes only its roughness), from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own; the texels' priors are centred on the precision-weighted means of their basis's texels, and the bases reported are then re-estimated by maximum likelihood on the photos of their texels of their kind together (Gauss-Newton, each texel with its own albedo, [`pooled_centre`]), since that mean is biased low under noise |
 //! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels; the fewest bases within 2% of the best error are kept, with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
 //!
 //! Texels are independent given the bases, so each is a small dense problem (4 to 9
@@ -639,6 +639,33 @@ impl TexelModel<'_> {
         }
     }
 
+    /// The data term of `pixels` at `x` (`prior` adds to it): `(data cost, half gradient,
+    /// half Gauss-Newton matrix)`, the matrix row-major `dim x dim`.
+    fn linearised_any(
+        &self,
+        x: &[f64],
+        pixels: &[usize],
+        sigma2: f64,
+        prior: &Prior,
+    ) -> (f64, Vec<f64>, Vec<f64>) {
+        fn parts<const N: usize>(l: Linearised<N>) -> (f64, Vec<f64>, Vec<f64>) {
+            let matrix = l.matrix.transpose();
+            (
+                l.data_cost,
+                l.gradient.as_slice().to_vec(),
+                matrix.as_slice().to_vec(),
+            )
+        }
+        match self.dim() {
+            4 => parts(self.linearise::<4, 1>(x, pixels, sigma2, prior)),
+            5 => parts(self.linearise::<5, 2>(x, pixels, sigma2, prior)),
+            6 => parts(self.linearise::<6, 3>(x, pixels, sigma2, prior)),
+            7 => parts(self.linearise::<7, 4>(x, pixels, sigma2, prior)),
+            9 => parts(self.linearise::<9, 6>(x, pixels, sigma2, prior)),
+            n => unreachable!("a maps fit has 4 to 9 coordinates, not {n}"),
+        }
+    }
+
     /// The kinds a texel may be.
     fn kinds(&self) -> &'static [Kind] {
         if self.space.known_fresnel.is_some() {
@@ -1109,6 +1136,13 @@ fn basis_fits(
         }
         clusters.recentre(&texels, &seen, specular);
     }
+    // The bases reported: pooled maximum-likelihood estimates. The texels' priors stay at the
+    // weighted means: centred on the pooled estimates they predicted the real captures' held-out
+    // photos worse (yellow_box at 128^2: 0.160 against 0.149, docs/maps.md).
+    for (b, centre) in clusters.centres.iter_mut().enumerate() {
+        let (kind, labels) = (clusters.kinds[b], &clusters.assignment);
+        pooled_centre(model, blocks, &texels, labels, b, kind, centre, sigma2);
+    }
     let total = clusters.assignment.len().max(1) as f64;
     let bases = clusters
         .centres
@@ -1127,6 +1161,96 @@ fn basis_fits(
         texels,
         bases,
         labels: clusters.assignment,
+    }
+}
+
+/// Gauss-Newton steps of [`pooled_centre`] at most, each backtracking at most
+/// `POOLED_HALVINGS` times.
+const POOLED_STEPS: usize = 10;
+const POOLED_HALVINGS: usize = 6;
+
+/// [`pooled_centre`] stops after a step below this in every coordinate (`ln alpha`, `logit
+/// F0`): 1e-4 relative in alpha.
+const POOLED_TOLERANCE: f64 = 1e-4;
+
+/// Basis `b`'s specular coordinates `centre` re-estimated by maximum likelihood from the
+/// photos of its texels of its own `kind` together: each texel at the basis's specular
+/// coordinates with its own diffuse albedo (and slopes), Gauss-Newton steps on the sum of
+/// their data terms from the precision-weighted mean of their estimates
+/// ([`Clusters::recentre`]). That mean is biased under noise: a texel fitted sharper than the
+/// truth has a larger derivative in `ln alpha`, so more precision, and pulls the mean down
+/// (docs/maps.md, "Noisy photos").
+#[allow(clippy::too_many_arguments)]
+fn pooled_centre(
+    model: &TexelModel,
+    blocks: &TexelBlocks,
+    texels: &[TexelFit],
+    assignment: &[usize],
+    b: usize,
+    kind: Kind,
+    centre: &mut [f64],
+    sigma2: f64,
+) {
+    let (s, dim) = (model.specular_dim(), model.dim());
+    let members: Vec<usize> = (0..texels.len())
+        .filter(|&t| assignment[t] == b && texels[t].kind == kind && !blocks.of(t).is_empty())
+        .collect();
+    if members.is_empty() {
+        return;
+    }
+    let flat = Prior {
+        kind,
+        centre: vec![0.0; dim],
+        precision: vec![0.0; dim],
+    };
+    // The pooled data cost, half gradient and half Gauss-Newton matrix in the specular
+    // coordinates, summed over the members in order (the same for any thread count).
+    let pooled = |specular: &[f64]| {
+        let parts: Vec<(f64, Vec<f64>, Vec<f64>)> = members
+            .par_iter()
+            .map(|&t| {
+                let mut x = texels[t].x.clone();
+                x[..s].copy_from_slice(specular);
+                model.linearised_any(&x, blocks.of(t), sigma2, &flat)
+            })
+            .collect();
+        let mut sums = (
+            0.0,
+            nalgebra::DVector::zeros(s),
+            nalgebra::DMatrix::zeros(s, s),
+        );
+        for (cost, gradient, matrix) in parts {
+            sums.0 += cost;
+            for i in 0..s {
+                sums.1[i] += gradient[i];
+                for j in 0..s {
+                    sums.2[(i, j)] += matrix[i * dim + j];
+                }
+            }
+        }
+        sums
+    };
+    let mut at = pooled(&centre[..s]);
+    for _ in 0..POOLED_STEPS {
+        let Some(factor) = at.2.clone().cholesky() else {
+            return;
+        };
+        let step = factor.solve(&at.1).map(|v: f64| v.clamp(-1.0, 1.0));
+        let mut scale = 1.0;
+        let accepted = (0..POOLED_HALVINGS).find_map(|_| {
+            let trial: Vec<f64> = (0..s).map(|i| centre[i] - scale * step[i]).collect();
+            let next = pooled(&trial);
+            scale *= 0.5;
+            (next.0 < at.0).then_some((trial, next))
+        });
+        let Some((trial, next)) = accepted else {
+            return;
+        };
+        centre[..s].copy_from_slice(&trial);
+        at = next;
+        if step.amax() < POOLED_TOLERANCE {
+            return;
+        }
     }
 }
 
