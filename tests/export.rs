@@ -863,7 +863,11 @@ fn maps_file() -> (tempfile::TempDir, PathBuf) {
                 [0.04, 0.03, 0.02]
             }
         }),
-        roughness: Some((0..8).map(|t| if metal(t) { 0.25 } else { 0.49 }).collect()),
+        roughness: Some(
+            (0..8)
+                .map(|t| if metal(t) { [0.25; 2] } else { [0.49; 2] })
+                .collect(),
+        ),
         normal: Some(normal),
     };
     maps.save(&path, Default::default()).unwrap();
@@ -1073,31 +1077,137 @@ fn maps_export_bad_input_exits_2_and_writes_nothing() {
         assert!(stderr.contains("normal.png"), "{stderr}");
         assert_eq!(folder_entries(dir.path()), before, "nothing written");
     }
-    // Maps have no json export (the material file is that), and an anisotropic uniform alpha
-    // has no texture form.
+    // Maps have no json export (the material file is that).
     let (dir, input) = maps_file();
-    let mut material = read_json(&input);
-    material["maps"]
-        .as_object_mut()
-        .unwrap()
-        .remove("roughness");
-    material["alpha"] = serde_json::json!([0.2, 0.4]);
-    let anisotropic = dir.path().join("anisotropic.json");
-    std::fs::write(&anisotropic, material.to_string()).unwrap();
     let before = folder_entries(dir.path());
-    for (input, format, expected) in [
-        (&input, "json", "tile.json: maps"),
-        (&anisotropic, "gltf", "anisotropic.json: alpha"),
+    let stderr = run_bad(&[
+        "export",
+        input.to_str().unwrap(),
+        "--format",
+        "json",
+        "-o",
+        dir.path().join("out").to_str().unwrap(),
+    ]);
+    assert!(stderr.contains("tile.json: maps"), "{stderr}");
+    assert_eq!(folder_entries(dir.path()), before, "nothing written");
+}
+
+/// [`maps_file`] with anisotropic roughness: the metal texels rougher along x (0.36 by 0.16),
+/// the dielectric ones along y (0.25 by 0.64).
+fn anisotropic_maps_file() -> (tempfile::TempDir, PathBuf, Vec<[f64; 2]>) {
+    let (dir, path) = maps_file();
+    let bouncefit::maps::AnyMaterial::Maps(mut maps) =
+        bouncefit::maps::AnyMaterial::load_with_warnings(&path)
+            .unwrap()
+            .0
+    else {
+        panic!("maps_file writes maps")
+    };
+    let alpha: Vec<[f64; 2]> = (0..8)
+        .map(|t| {
+            if t % 4 < 2 {
+                [0.36, 0.16]
+            } else {
+                [0.25, 0.64]
+            }
+        })
+        .collect();
+    maps.roughness = Some(alpha.clone());
+    maps.save(&path, Default::default()).unwrap();
+    (dir, path, alpha)
+}
+
+#[test]
+fn maps_exports_carry_each_texels_anisotropic_roughness() {
+    let (dir, input, alpha) = anisotropic_maps_file();
+    let close = |got: f64, want: f64| (got - want).abs() < 2e-4 * want.max(1.0);
+    // Texel `t`'s alphas from a format's larger and smaller alpha and its direction.
+    let gives_back = |what: &str, t: usize, (stretched, across): (f64, f64), along_y: bool| {
+        let (x, y) = if along_y {
+            (across, stretched)
+        } else {
+            (stretched, across)
+        };
+        assert!(
+            close(x, alpha[t][0]) && close(y, alpha[t][1]),
+            "{what} texel {t}: {x}, {y}"
+        );
+    };
+    // glTF: roughness of the smaller alpha, and KHR_materials_anisotropy's texture whose
+    // direction and strength give back the larger (alpha_t = mix(r^2, 1, s^2)).
+    let (text, textures) = export_maps(&input, "gltf", "gltf.gltf");
+    assert!(
+        textures.contains(&"anisotropy.png".to_string()),
+        "{textures:?}"
+    );
+    let document: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let extension = &document["materials"][0]["extensions"]["KHR_materials_anisotropy"];
+    assert_eq!(extension["anisotropyStrength"], 1.0);
+    assert!(document["extensionsUsed"]
+        .as_array()
+        .unwrap()
+        .contains(&serde_json::json!("KHR_materials_anisotropy")));
+    let folder = dir.path().join("gltf.textures");
+    let packed = png_texels(&folder.join("metallic_roughness.png"));
+    let anisotropy = png_texels(&folder.join("anisotropy.png"));
+    for t in 0..8 {
+        let [ax, ay] = alpha[t];
+        let r2 = packed[t][1].powi(2);
+        let (direction, strength) = (
+            [0, 1].map(|i| 2.0 * anisotropy[t][i] - 1.0),
+            anisotropy[t][2],
+        );
+        let stretched = r2 + (1.0 - r2) * strength * strength;
+        let along_y = direction[1].abs() > direction[0].abs();
+        gives_back("glTF", t, (stretched, r2), along_y);
+    }
+    // MaterialX: each shader's roughness and anisotropy give back both alphas (the inverse
+    // of mx_roughness_anisotropy and of OpenPBR's), along the rotation or tangent texture.
+    let (text, textures) = export_maps(&input, "materialx", "mtlx.mtlx");
+    let folder = dir.path().join("mtlx.textures");
+    for file in [
+        "standard_surface_roughness.png",
+        "open_pbr_roughness.png",
+        "tangent.png",
     ] {
-        let stderr = run_bad(&[
-            "export",
-            input.to_str().unwrap(),
-            "--format",
-            format,
-            "-o",
-            dir.path().join("out").to_str().unwrap(),
-        ]);
-        assert!(stderr.contains(expected), "{stderr}");
-        assert_eq!(folder_entries(dir.path()), before, "nothing written");
+        assert!(textures.contains(&file.to_string()), "{textures:?}");
+        assert!(text.contains(&format!("mtlx.textures/{file}")), "{file}");
+    }
+    let standard = png_texels(&folder.join("standard_surface_roughness.png"));
+    let open_pbr = png_texels(&folder.join("open_pbr_roughness.png"));
+    let tangent = png_texels(&folder.join("tangent.png"));
+    for t in 0..8 {
+        let [r, a, rotation] = standard[t];
+        let axes = (r * r / (1.0 - a).sqrt(), r * r * (1.0 - a).sqrt());
+        gives_back("standard_surface", t, axes, rotation > 0.1);
+        let [r, a, _] = open_pbr[t];
+        let at = r * r * (2.0 / (1.0 + (1.0 - a).powi(2))).sqrt();
+        gives_back(
+            "open_pbr_surface",
+            t,
+            (at, (1.0 - a) * at),
+            tangent[t][1] > 0.5,
+        );
+    }
+    // Mitsuba: alpha_u along x and alpha_v along y, as float bitmaps.
+    let (text, textures) = export_maps(&input, "mitsuba", "mitsuba.xml");
+    let folder = dir.path().join("mitsuba.textures");
+    assert!(
+        textures.contains(&"alpha_u.exr".to_string())
+            && !textures.contains(&"alpha.exr".to_string())
+    );
+    assert!(text.contains("name=\"alpha_u\"") && text.contains("name=\"alpha_v\""));
+    for (file, axis) in [("alpha_u.exr", 0), ("alpha_v.exr", 1)] {
+        let image = bouncefit::capture::image_io::load_image(
+            &folder.join(file),
+            bouncefit::capture::ColorEncoding::Linear,
+        )
+        .unwrap();
+        for t in 0..8 {
+            assert!(
+                close(f64::from(image.rgb[t][0]), alpha[t][axis]),
+                "{file} texel {t}"
+            );
+        }
     }
 }

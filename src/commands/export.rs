@@ -23,7 +23,7 @@ use super::output::{check_output_file, StagedFolder};
 use crate::capture::atomic_file::write_atomically;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
-use crate::export::maps::MapsConversion;
+use crate::export::maps::{MapsConversion, PbrFormat};
 use crate::export::mitsuba::Scene;
 use crate::export::{gltf, json, materialx, mitsuba, Conversion, ExportFormat};
 use crate::maps::{AnyMaterial, MaterialMaps};
@@ -101,7 +101,7 @@ fn export_maps(args: &ExportArgs, format: ExportFormat, maps: &MaterialMaps) -> 
              JSON form (use gltf, materialx or mitsuba)",
         ));
     }
-    let conversion = MapsConversion::new(&args.input, maps)?;
+    let conversion = MapsConversion::new(maps);
     let scene = scene_of(&args.input);
     let textures = args.output.with_extension("textures");
     let prefix = textures
@@ -112,11 +112,11 @@ fn export_maps(args: &ExportArgs, format: ExportFormat, maps: &MaterialMaps) -> 
     let folder = StagedFolder::new(&textures, args.force)?;
     let text = match format {
         ExportFormat::Gltf => {
-            let written = conversion.write_pbr_textures(folder.staging())?;
+            let written = conversion.write_pbr_textures(folder.staging(), PbrFormat::Gltf)?;
             gltf::maps_document(&conversion, &written, &prefix, scene.sample)
         }
         ExportFormat::Materialx => {
-            let written = conversion.write_pbr_textures(folder.staging())?;
+            let written = conversion.write_pbr_textures(folder.staging(), PbrFormat::Materialx)?;
             materialx::maps_document(&conversion, &written, &prefix)
         }
         ExportFormat::Mitsuba => {
@@ -164,7 +164,7 @@ fn export_scenes(args: &ExportArgs, capture_path: &Path) -> Result<()> {
         }
         AnyMaterial::Maps(maps) => {
             maps.check_sample(&args.input, &capture.sample)?;
-            let conversion = MapsConversion::new(&args.input, maps)?;
+            let conversion = MapsConversion::new(maps);
             let textures = folder.path("textures");
             std::fs::create_dir(&textures).map_err(|e| Error::io(&textures, e))?;
             let written = conversion.write_mitsuba_textures(&textures)?;

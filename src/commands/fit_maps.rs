@@ -209,6 +209,7 @@ impl MapsSet {
                 ndf: options.ndf,
                 height: options.height,
                 known_fresnel: options.real.fresnel_known,
+                anisotropic: options.anisotropic,
                 grid: self.grid,
                 normals: self.maps.normals,
                 max_bases: self.maps.bases,

@@ -18,7 +18,9 @@
 //! ([`super::maps`]) carry the texels: `baseColorTexture`, `metallicRoughnessTexture` (glTF 2.0
 //! section 3.9.2), `normalTexture` (section 3.9.3), and for dielectric texels
 //! `KHR_materials_ior` (one index for the map) with `KHR_materials_specular`'s
-//! `specularColorTexture`. Samplers are NEAREST / CLAMP_TO_EDGE (section 5.26): the fit's
+//! `specularColorTexture`; anisotropic maps add `KHR_materials_anisotropy`'s
+//! `anisotropyTexture` (per texel the direction of the larger alpha, x or y, and the strength
+//! of the table above; `metallicRoughnessTexture` then holds the smaller alpha's roughness). Samplers are NEAREST / CLAMP_TO_EDGE (section 5.26): the fit's
 //! lookup is nearest-texel. A quad mesh of the sample's size (sections 3.7.2, 3.6, one `data:`
 //! buffer) carries `TEXCOORD_0` with glTF's top-left origin (section 3.8.2: v = 0 at the
 //! sample's +y edge, texel row 0), `NORMAL` +z and `TANGENT` +x (w = 1, so the bitangent is +y,
@@ -39,21 +41,33 @@ fn roughness(alpha: f64) -> f64 {
     alpha.sqrt().min(1.0)
 }
 
+/// `(roughness, anisotropyStrength, along_y)` of `alpha` (module table): glTF's roughness of
+/// the smaller alpha and the strength that stretches it to the larger along the tangent, or
+/// along the bitangent (the sample's y) when `along_y`.
+pub fn anisotropy(alpha: [f64; 2]) -> (f64, f64, bool) {
+    let (high, low, along_y) = super::stretch(alpha);
+    let strength = if high > low {
+        ((high.min(1.0) - low) / (1.0 - low)).max(0.0).sqrt()
+    } else {
+        0.0
+    };
+    (roughness(low), strength.min(1.0), along_y)
+}
+
 /// `(roughnessFactor, KHR_materials_anisotropy)`, see the module table.
 fn roughness_and_anisotropy(conversion: &Conversion) -> (f64, Option<Value>) {
-    let [ax, ay] = conversion.material.alpha;
+    let alpha = conversion.material.alpha;
     if !conversion.is_anisotropic() {
-        return (roughness(ax), None);
+        return (roughness(alpha[0]), None);
     }
-    let (low, high) = (ax.min(ay), ax.max(ay).min(1.0));
-    let strength = ((high - low) / (1.0 - low)).max(0.0).sqrt();
-    let rotation = if ax >= ay {
-        0.0
-    } else {
+    let (roughness, strength, along_y) = anisotropy(alpha);
+    let rotation = if along_y {
         std::f64::consts::FRAC_PI_2
+    } else {
+        0.0
     };
     (
-        roughness(low),
+        roughness,
         Some(json!({"anisotropyStrength": strength, "anisotropyRotation": rotation})),
     )
 }
@@ -201,6 +215,13 @@ pub fn maps_document(
         extensions.insert(
             "KHR_materials_specular".into(),
             json!({"specularFactor": 1.0, "specularColorTexture": texture(specular)}),
+        );
+    }
+    if let Some(anisotropy) = &textures.anisotropy {
+        extensions.insert(
+            "KHR_materials_anisotropy".into(),
+            json!({"anisotropyStrength": 1.0, "anisotropyRotation": 0.0,
+                   "anisotropyTexture": texture(anisotropy)}),
         );
     }
     let mut notes = conversion.notes();

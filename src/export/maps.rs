@@ -12,18 +12,21 @@
 //! | file (in the textures folder) | written for | texel value | encoding |
 //! | --- | --- | --- | --- |
 //! | `base_color.png` | glTF, MaterialX | metal: `F0`; dielectric: diffuse albedo | 8-bit sRGB (glTF 2.0 section 3.9.2 requires sRGB base colour) |
-//! | `metallic_roughness.png` | glTF, MaterialX | G: perceptual roughness `sqrt(alpha)` (capped at 1), B: metallic 0 or 1, R: 0 | 16-bit linear (glTF 2.0 section 3.9.2: roughness in G, metalness in B) |
+//! | `metallic_roughness.png` | glTF, MaterialX | G: perceptual roughness `sqrt(alpha)` (capped at 1; anisotropic maps: of the smaller alpha), B: metallic 0 or 1, R: 0 | 16-bit linear (glTF 2.0 section 3.9.2: roughness in G, metalness in B) |
+//! | `anisotropy.png` | glTF, anisotropic maps | RG: the direction of the larger alpha in tangent space, `0.5 d + 0.5` (x: (1, 0.5), y: (0.5, 1)); B: `anisotropyStrength` ([`super::gltf::anisotropy`]) | 16-bit linear (`KHR_materials_anisotropy`'s `anisotropyTexture`) |
+//! | `standard_surface_roughness.png`, `open_pbr_roughness.png` | MaterialX, anisotropic maps | each shader's `specular_roughness` in R and its anisotropy in G ([`super::materialx`]'s table); B: `specular_rotation` (standard_surface), 0 (open_pbr_surface) | 16-bit linear |
+//! | `tangent.png` | MaterialX, anisotropic maps | the direction of the larger alpha, `(1, 0, 0)` (+x) or `(0, 1, 0)` (+y): open_pbr_surface's `geometry_tangent`, which has no rotation input | 16-bit linear |
 //! | `specular_color.png` | glTF, MaterialX, when some dielectric `F0` is not grey | dielectric: `F0 / F0(ior)` per channel; metal: 1 | 8-bit sRGB (KHR_materials_specular `specularColorTexture`) |
 //! | `normal.png` | glTF, MaterialX, with a normal map | `0.5 n + 0.5`, tangent space, +y towards row 0 | 16-bit linear |
-//! | `alpha.exr`, `eta.exr`, `k.exr`, `diffuse.exr`, `normal.exr` | Mitsuba ([`super::mitsuba`]) | `alpha`; the texel's equivalent conductor; twice the diffuse albedo; `0.5 n + 0.5` | float EXR, read raw |
+//! | `alpha.exr` (anisotropic maps: `alpha_u.exr`, `alpha_v.exr`), `eta.exr`, `k.exr`, `diffuse.exr`, `normal.exr` | Mitsuba ([`super::mitsuba`]) | `alpha` (along x, along y); the texel's equivalent conductor; twice the diffuse albedo; `0.5 n + 0.5` | float EXR, read raw |
 //!
 //! Every image has the texel grid's resolution, row 0 at the sample's +y edge, column 0 at its
 //! -x edge (the maps' own layout, [`crate::maps::files`]); lookups are nearest-texel in every
 //! format, as in `bouncefit render`.
 
-use super::{base, equivalent_conductor, Base, Conversion, SchlickTintTable};
+use super::{base, equivalent_conductor, stretch, Base, Conversion, SchlickTintTable};
 use crate::capture::image_io::{write_exr, write_png_tonemapped};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::maps::files::write_png16;
 use crate::maps::MaterialMaps;
 use crate::material::{FresnelSpec, Material};
@@ -53,20 +56,8 @@ pub struct MapsConversion {
 }
 
 impl MapsConversion {
-    /// The facts of `maps` (read from `path`); refuses an anisotropic uniform `alpha`, which
-    /// the texture formats would need per-texel anisotropy textures for.
-    pub fn new(path: &Path, maps: &MaterialMaps) -> Result<MapsConversion> {
-        let [ax, ay] = maps.base.alpha;
-        if maps.roughness.is_none() && ax != ay {
-            return Err(Error::invalid(
-                path,
-                "alpha",
-                format!(
-                    "[{ax}, {ay}] is anisotropic; exporting maps needs an isotropic alpha or a \
-                     roughness map"
-                ),
-            ));
-        }
+    /// The facts of `maps`.
+    pub fn new(maps: &MaterialMaps) -> MapsConversion {
         let materials: Vec<Material> = (0..maps.grid.len()).map(|t| maps.texel(t)).collect();
         let bases: Vec<Base> = materials.iter().map(base).collect();
         let strongest = materials
@@ -97,14 +88,18 @@ impl MapsConversion {
             .collect::<Vec<_>>();
         let roughest = texels
             .iter()
-            .max_by(|a, b| a.material.alpha[0].total_cmp(&b.material.alpha[0]))
+            .max_by(|a, b| {
+                stretch(a.material.alpha)
+                    .0
+                    .total_cmp(&stretch(b.material.alpha).0)
+            })
             .expect("a texel grid has texels");
-        Ok(MapsConversion {
+        MapsConversion {
             maps: maps.clone(),
             dielectric_ior: strongest.map(super::ior_from_f0),
             roughest: Conversion::new(&roughest.material),
             texels,
-        })
+        }
     }
 
     pub fn has_diffuse(&self) -> bool {
@@ -151,9 +146,9 @@ impl MapsConversion {
         notes
     }
 
-    /// The texture files (module table) of the glTF and MaterialX exports, written into
+    /// The texture files (module table) of the glTF or MaterialX export, written into
     /// `folder` (which must exist).
-    pub fn write_pbr_textures(&self, folder: &Path) -> Result<PbrTextures> {
+    pub fn write_pbr_textures(&self, folder: &Path, format: PbrFormat) -> Result<PbrTextures> {
         let colour = |path: PathBuf, of: &dyn Fn(&TexelFacts) -> [f64; 3]| -> Result<PathBuf> {
             let rgb: Vec<[f32; 3]> = self
                 .texels
@@ -185,12 +180,57 @@ impl MapsConversion {
             .map(|t| {
                 [
                     0.0,
-                    t.material.alpha[0].sqrt().min(1.0),
+                    super::gltf::anisotropy(t.material.alpha).0,
                     f64::from(u8::from(t.metal)),
                 ]
             })
             .collect();
+        let anisotropic = self.maps.is_anisotropic();
+        let per_texel = |of: &dyn Fn([f64; 2]) -> [f64; 3]| -> Vec<[f64; 3]> {
+            self.texels.iter().map(|t| of(t.material.alpha)).collect()
+        };
+        let gltf_anisotropy = |alpha| {
+            let (_, strength, along_y) = super::gltf::anisotropy(alpha);
+            if along_y {
+                [0.5, 1.0, strength]
+            } else {
+                [1.0, 0.5, strength]
+            }
+        };
+        let (gltf, materialx) = (
+            anisotropic && format == PbrFormat::Gltf,
+            anisotropic && format == PbrFormat::Materialx,
+        );
+        let materialx_texture = |name: &str, of: &dyn Fn([f64; 2]) -> [f64; 3]| {
+            materialx
+                .then(|| linear(folder.join(name), &per_texel(of), |v| v))
+                .transpose()
+        };
         Ok(PbrTextures {
+            anisotropy: gltf
+                .then(|| {
+                    linear(
+                        folder.join("anisotropy.png"),
+                        &per_texel(&gltf_anisotropy),
+                        |v| v,
+                    )
+                })
+                .transpose()?,
+            standard_surface_roughness: materialx_texture(
+                "standard_surface_roughness.png",
+                &super::materialx::standard_surface_roughness,
+            )?,
+            open_pbr_roughness: materialx_texture("open_pbr_roughness.png", &|alpha| {
+                let [r, a] = super::materialx::open_pbr_roughness(alpha);
+                [r, a, 0.0]
+            })?,
+            tangent: materialx_texture("tangent.png", &|alpha| {
+                if stretch(alpha).2 {
+                    [0.0, 1.0, 0.0]
+                } else {
+                    [1.0, 0.0, 0.0]
+                }
+            })?,
             base_color: colour(folder.join("base_color.png"), &|t| {
                 if t.metal {
                     t.f0
@@ -235,8 +275,16 @@ impl MapsConversion {
             .map(|t| texel_conductor(&t.material.fresnel))
             .collect();
         let texel = |t: usize| &self.texels[t].material;
+        let alpha = if self.maps.is_anisotropic() {
+            vec![
+                ("alpha_u", exr("alpha_u.exr", &|t| [texel(t).alpha[0]; 3])?),
+                ("alpha_v", exr("alpha_v.exr", &|t| [texel(t).alpha[1]; 3])?),
+            ]
+        } else {
+            vec![("alpha", exr("alpha.exr", &|t| [texel(t).alpha[0]; 3])?)]
+        };
         Ok(MitsubaTextures {
-            alpha: exr("alpha.exr", &|t| [texel(t).alpha[0]; 3])?,
+            alpha,
             eta: exr("eta.exr", &|t| conductors[t].0)?,
             k: exr("k.exr", &|t| conductors[t].1)?,
             diffuse: match self.has_diffuse() {
@@ -269,17 +317,31 @@ fn texel_conductor(fresnel: &FresnelSpec) -> ([f64; 3], [f64; 3]) {
     }
 }
 
-/// The files [`MapsConversion::write_pbr_textures`] wrote.
+/// The format [`MapsConversion::write_pbr_textures`] writes for: the formats share the
+/// metallic workflow's textures and differ in how they carry anisotropy.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PbrFormat {
+    Gltf,
+    Materialx,
+}
+
+/// The files [`MapsConversion::write_pbr_textures`] wrote; the anisotropy textures only for
+/// anisotropic maps, each for its format.
 pub struct PbrTextures {
     pub base_color: PathBuf,
     pub metallic_roughness: PathBuf,
     pub specular_color: Option<PathBuf>,
     pub normal: Option<PathBuf>,
+    pub anisotropy: Option<PathBuf>,
+    pub standard_surface_roughness: Option<PathBuf>,
+    pub open_pbr_roughness: Option<PathBuf>,
+    pub tangent: Option<PathBuf>,
 }
 
 /// The files [`MapsConversion::write_mitsuba_textures`] wrote.
 pub struct MitsubaTextures {
-    pub alpha: PathBuf,
+    /// `alpha`, or `alpha_u` and `alpha_v`, with their files.
+    pub alpha: Vec<(&'static str, PathBuf)>,
     pub eta: PathBuf,
     pub k: PathBuf,
     pub diffuse: Option<PathBuf>,

@@ -72,13 +72,12 @@ struct ShaderNames {
 }
 
 /// The inputs both shaders share up to their names; `metal_specular_color` is the shader's own
-/// metal edge colour, `anisotropic` gives its roughness inputs from `(alpha_t, alpha_b,
-/// alpha_y > alpha_x)`.
+/// metal edge colour, `anisotropic` gives its roughness inputs from an anisotropic `alpha`.
 fn shader_inputs(
     conversion: &Conversion,
     names: ShaderNames,
     metal_specular_color: [f64; 3],
-    anisotropic: impl Fn(f64, f64, bool) -> Vec<(&'static str, Input)>,
+    anisotropic: impl Fn([f64; 2]) -> Vec<(&'static str, Input)>,
 ) -> Vec<(&'static str, Input)> {
     let (metalness, base_color, specular_color, ior) = match conversion.base {
         Base::Metal => (1.0, conversion.f0, metal_specular_color, None),
@@ -96,11 +95,11 @@ fn shader_inputs(
     if let Some(ior) = ior {
         inputs.push((names.ior, Input::Float(ior)));
     }
-    let [ax, ay] = conversion.material.alpha;
+    let alpha = conversion.material.alpha;
     if conversion.is_anisotropic() {
-        inputs.extend(anisotropic(ax.max(ay), ax.min(ay), ay > ax));
+        inputs.extend(anisotropic(alpha));
     } else {
-        inputs.push(("specular_roughness", Input::Float(ax.sqrt())));
+        inputs.push(("specular_roughness", Input::Float(alpha[0].sqrt())));
     }
     inputs
 }
@@ -119,45 +118,51 @@ const OPEN_PBR_NAMES: ShaderNames = ShaderNames {
     ior: "specular_ior",
 };
 
+/// `[specular_roughness, specular_anisotropy, specular_rotation]` of standard_surface for
+/// `alpha` (module table; isotropic: anisotropy and rotation 0).
+pub fn standard_surface_roughness(alpha: [f64; 2]) -> [f64; 3] {
+    let (high, low, along_y) = super::stretch(alpha);
+    [
+        (high * low).powf(0.25),
+        (1.0 - low / high).min(STANDARD_SURFACE_MAX_ANISOTROPY),
+        if along_y { 0.25 } else { 0.0 },
+    ]
+}
+
+/// `[specular_roughness, specular_roughness_anisotropy]` of open_pbr_surface for `alpha`
+/// (module table), along the tangent, which must follow the larger alpha.
+pub fn open_pbr_roughness(alpha: [f64; 2]) -> [f64; 2] {
+    let (high, low, _) = super::stretch(alpha);
+    [
+        ((high * high + low * low) / 2.0).powf(0.25),
+        1.0 - low / high,
+    ]
+}
+
 fn standard_surface(conversion: &Conversion) -> Vec<(&'static str, Input)> {
     shader_inputs(
         conversion,
         STANDARD_SURFACE_NAMES,
         conversion.edge_tint,
-        |high, low, along_y| {
+        |alpha| {
+            let [r, a, rotation] = standard_surface_roughness(alpha);
             vec![
-                ("specular_roughness", Input::Float((high * low).powf(0.25))),
-                (
-                    "specular_anisotropy",
-                    Input::Float((1.0 - low / high).min(STANDARD_SURFACE_MAX_ANISOTROPY)),
-                ),
-                (
-                    "specular_rotation",
-                    Input::Float(if along_y { 0.25 } else { 0.0 }),
-                ),
+                ("specular_roughness", Input::Float(r)),
+                ("specular_anisotropy", Input::Float(a)),
+                ("specular_rotation", Input::Float(rotation)),
             ]
         },
     )
 }
 
 fn open_pbr_surface(conversion: &Conversion) -> Vec<(&'static str, Input)> {
-    shader_inputs(
-        conversion,
-        OPEN_PBR_NAMES,
-        conversion.f82_tint,
-        |high, low, _| {
-            vec![
-                (
-                    "specular_roughness",
-                    Input::Float(((high * high + low * low) / 2.0).powf(0.25)),
-                ),
-                (
-                    "specular_roughness_anisotropy",
-                    Input::Float(1.0 - low / high),
-                ),
-            ]
-        },
-    )
+    shader_inputs(conversion, OPEN_PBR_NAMES, conversion.f82_tint, |alpha| {
+        let [r, a] = open_pbr_roughness(alpha);
+        vec![
+            ("specular_roughness", Input::Float(r)),
+            ("specular_roughness_anisotropy", Input::Float(a)),
+        ]
+    })
 }
 
 fn notes(conversion: &Conversion) -> Vec<String> {
@@ -287,6 +292,11 @@ struct MapNodes {
     roughness: Input,
     specular_color: Input,
     normal: Option<Input>,
+    /// Anisotropic maps: each shader's roughness inputs (name, node), and open_pbr_surface's
+    /// tangent.
+    standard_surface_roughness: Vec<(&'static str, Input)>,
+    open_pbr_roughness: Vec<(&'static str, Input)>,
+    tangent: Option<Input>,
 }
 
 fn map_nodes(textures: &PbrTextures, prefix: &str) -> MapNodes {
@@ -314,10 +324,18 @@ fn map_nodes(textures: &PbrTextures, prefix: &str) -> MapNodes {
         Some(path) => image("specular_color_image", "color3", path, "srgb_texture"),
         None => Input::Color3([1.0; 3]),
     };
-    let normal_image = textures
-        .normal
-        .as_deref()
-        .map(|path| image("normal_image", "vector3", path, "raw"));
+    // The data textures a maps material may lack: raw `vector3` images.
+    let mut data = |node: &str, path: &Option<std::path::PathBuf>| {
+        path.as_deref()
+            .map(|path| image(node, "vector3", path, "raw"))
+    };
+    let normal_image = data("normal_image", &textures.normal);
+    let standard_image = data(
+        "standard_surface_roughness_image",
+        &textures.standard_surface_roughness,
+    );
+    let open_pbr_image = data("open_pbr_roughness_image", &textures.open_pbr_roughness);
+    let tangent = data("tangent_image", &textures.tangent);
     let Input::Node(_, packed) = metallic_roughness else {
         unreachable!("an image is a node")
     };
@@ -352,6 +370,35 @@ fn map_nodes(textures: &PbrTextures, prefix: &str) -> MapNodes {
     let roughness = node("roughness", "extract", &[("in", packed.clone())], &index(1));
     let metalness = node("metalness", "extract", &[("in", packed)], &index(2));
     let normal = normal_image.map(|from| node("normal", "normalmap", &[("in", from)], ""));
+    let mut extracted = |image: Option<Input>, inputs: &[(&'static str, &str)]| match image {
+        Some(packed) => inputs
+            .iter()
+            .enumerate()
+            .map(|(i, &(input, name))| {
+                let index = index(i as u8);
+                (
+                    input,
+                    node(name, "extract", &[("in", packed.clone())], &index),
+                )
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    let standard_surface_roughness = extracted(
+        standard_image,
+        &[
+            ("specular_roughness", "standard_surface_roughness"),
+            ("specular_anisotropy", "standard_surface_anisotropy"),
+            ("specular_rotation", "standard_surface_rotation"),
+        ],
+    );
+    let open_pbr_roughness = extracted(
+        open_pbr_image,
+        &[
+            ("specular_roughness", "open_pbr_roughness"),
+            ("specular_roughness_anisotropy", "open_pbr_anisotropy"),
+        ],
+    );
     MapNodes {
         xml,
         base_color,
@@ -359,6 +406,9 @@ fn map_nodes(textures: &PbrTextures, prefix: &str) -> MapNodes {
         roughness,
         specular_color,
         normal,
+        standard_surface_roughness,
+        open_pbr_roughness,
+        tangent,
     }
 }
 
@@ -366,23 +416,28 @@ fn map_nodes(textures: &PbrTextures, prefix: &str) -> MapNodes {
 /// `standard_surface` and an `open_pbr_surface`.
 pub fn maps_document(conversion: &MapsConversion, textures: &PbrTextures, prefix: &str) -> String {
     let nodes = map_nodes(textures, prefix);
-    let shader = |names: ShaderNames, normal: &'static str| {
-        let mut inputs = vec![
-            (names.base_weight, Input::Float(1.0)),
-            ("base_color", nodes.base_color.clone()),
-            (names.metalness, nodes.metalness.clone()),
-            (names.specular_weight, Input::Float(1.0)),
-            ("specular_color", nodes.specular_color.clone()),
-            ("specular_roughness", nodes.roughness.clone()),
-        ];
-        if let Some(ior) = conversion.dielectric_ior {
-            inputs.push((names.ior, Input::Float(ior)));
-        }
-        if let Some(n) = &nodes.normal {
-            inputs.push((normal, n.clone()));
-        }
-        inputs
-    };
+    let shader =
+        |names: ShaderNames, normal: &'static str, anisotropic: &[(&'static str, Input)]| {
+            let mut inputs = vec![
+                (names.base_weight, Input::Float(1.0)),
+                ("base_color", nodes.base_color.clone()),
+                (names.metalness, nodes.metalness.clone()),
+                (names.specular_weight, Input::Float(1.0)),
+                ("specular_color", nodes.specular_color.clone()),
+            ];
+            if anisotropic.is_empty() {
+                inputs.push(("specular_roughness", nodes.roughness.clone()));
+            } else {
+                inputs.extend(anisotropic.iter().cloned());
+            }
+            if let Some(ior) = conversion.dielectric_ior {
+                inputs.push((names.ior, Input::Float(ior)));
+            }
+            if let Some(n) = &nodes.normal {
+                inputs.push((normal, n.clone()));
+            }
+            inputs
+        };
     let mut notes = conversion.notes();
     notes.push(
         "the images' row 0 is the sample's +y edge: MaterialX puts an image's lower left at \
@@ -398,11 +453,28 @@ pub fn maps_document(conversion: &MapsConversion, textures: &PbrTextures, prefix
                 .into(),
         );
     }
+    if nodes.tangent.is_some() {
+        notes.push(
+            "anisotropic texels: standard_surface turns its anisotropy by specular_rotation \
+             (0: along the geometry's tangent, which must be the sample's +x; 0.25: along +y); \
+             open_pbr_surface, which has no rotation, reads geometry_tangent from \
+             tangent.png (+x or +y, world space of a sample in the z = 0 plane)"
+                .into(),
+        );
+    }
     notes.extend(shared_notes(&conversion.roughest));
     let mut xml = header(conversion.maps.base.model, &notes);
     xml += &nodes.xml;
+    let mut open_pbr = shader(OPEN_PBR_NAMES, "geometry_normal", &nodes.open_pbr_roughness);
+    if let Some(tangent) = &nodes.tangent {
+        open_pbr.push(("geometry_tangent", tangent.clone()));
+    }
     xml + &shaders(
-        &shader(STANDARD_SURFACE_NAMES, "normal"),
-        &shader(OPEN_PBR_NAMES, "geometry_normal"),
+        &shader(
+            STANDARD_SURFACE_NAMES,
+            "normal",
+            &nodes.standard_surface_roughness,
+        ),
+        &open_pbr,
     )
 }

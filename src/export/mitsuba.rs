@@ -31,7 +31,8 @@
 //!
 //! A maps material ([`maps_document`]) is the same BSDF with `bitmap` textures (Mitsuba 3
 //! plugin reference: `bitmap` with `raw` true and `filter_type` nearest, float EXRs of
-//! [`super::maps`]) for `alpha`, `eta`, `k` and the doubled diffuse reflectance, under the
+//! [`super::maps`]) for `alpha` (or `alpha_u`, `alpha_v` where a texel is anisotropic), `eta`,
+//! `k` and the doubled diffuse reflectance, under the
 //! `normalmap` BSDF when the maps have normals (it evaluates the nested BSDF in the frame of the
 //! texel's normal built from `dp_du` = +x, as [`crate::maps`] does). Every texel, metal or
 //! dielectric, is the fit's sum of a Schlick-F0 GGX lobe and a Lambertian albedo, which the
@@ -318,7 +319,11 @@ impl Lobe {
         };
         Lobe {
             distribution: conversion.maps.base.ndf.name(),
-            alpha: vec![("alpha", file(&textures.alpha))],
+            alpha: textures
+                .alpha
+                .iter()
+                .map(|(name, path)| (*name, file(path)))
+                .collect(),
             eta: file(&textures.eta),
             k: file(&textures.k),
             doubled_diffuse: textures.diffuse.as_deref().map(file),

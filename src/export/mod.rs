@@ -228,6 +228,13 @@ impl Conversion {
 }
 
 /// A number as the shortest text that parses back to the same f64 (Rust's `Debug` format).
+/// An anisotropic roughness `[alpha_x, alpha_y]` as `(alpha_t, alpha_b, along_y)`: the larger
+/// alpha, the smaller, and whether the larger lies along the sample's y (else along x), the
+/// form the formats' anisotropy takes (a tangent direction and a stretch along it).
+pub fn stretch([ax, ay]: [f64; 2]) -> (f64, f64, bool) {
+    (ax.max(ay), ax.min(ay), ay > ax)
+}
+
 pub fn number(x: f64) -> String {
     format!("{x:?}")
 }

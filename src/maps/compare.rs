@@ -13,7 +13,7 @@
 //!
 //! | quantity | per texel |
 //! | --- | --- |
-//! | `alpha` | `alpha_model - alpha_single` |
+//! | `alpha` | `alpha_model - alpha_single` (of anisotropic maps, `sqrt(alpha_x alpha_y)`: [`MaterialMaps::alpha`]) |
 //! | `diffuse` | mean over RGB of the diffuse albedo difference |
 //! | `f0` | mean over RGB of the Schlick F0 difference (0 with a known Fresnel) |
 //!
@@ -122,7 +122,7 @@ impl TexelDeltas {
         );
         for t in 0..n {
             let (a, b) = (model.texel(t), single.texel(t));
-            alpha.push(a.alpha[0] - b.alpha[0]);
+            alpha.push(model.alpha(t) - single.alpha(t));
             diffuse.push(mean(a.diffuse) - mean(b.diffuse));
             f0_delta.push(f0(model, t) - f0(single, t));
         }
@@ -157,8 +157,7 @@ impl MapsDifference {
                 let pick = |v: &[f64]| texels.iter().map(|&t| v[t]).collect::<Vec<f64>>();
                 let alpha = pick(&deltas.alpha);
                 let mean_alpha = |m: &MaterialMaps| {
-                    texels.iter().map(|&t| m.texel(t).alpha[0]).sum::<f64>()
-                        / texels.len().max(1) as f64
+                    texels.iter().map(|&t| m.alpha(t)).sum::<f64>() / texels.len().max(1) as f64
                 };
                 Some(RegionDelta {
                     basis: b,
@@ -243,7 +242,7 @@ mod tests {
             },
             diffuse: Some(vec![[diffuse; 3]; n]),
             specular: None,
-            roughness: Some(alpha),
+            roughness: Some(alpha.into_iter().map(|a| [a; 2]).collect()),
             normal: None,
         }
     }
@@ -269,6 +268,7 @@ mod tests {
         let basis = |kind, alpha| Basis {
             kind,
             alpha,
+            alpha_xy: None,
             f0: None,
             share: 0.5,
         };

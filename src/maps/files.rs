@@ -10,7 +10,7 @@
 //! | map | encoding read | written by bouncefit |
 //! | --- | --- | --- |
 //! | `diffuse`, `specular` | EXR and 16-bit PNG: linear values; 8-bit PNG/JPEG: sRGB-encoded (the texture convention of glTF and of paint programs) | 16-bit PNG, linear |
-//! | `roughness` | `alpha` itself (not perceptual roughness) in the first channel: EXR any value > 0; PNG `code / max` in (0, 1] | EXR (`alpha` in R, G and B) |
+//! | `roughness` | `alpha` itself (not perceptual roughness): R along the sample's x, G along its y (a grey image is isotropic; B is not read); EXR any value > 0; PNG `code / max` in (0, 1] | EXR (`alpha_x` in R, `alpha_y` in G, `sqrt(alpha_x alpha_y)` in B: grey where isotropic) |
 //! | `normal` | `n = 2 code / max - 1` per channel (OpenGL/glTF convention: +y up), normalised; `n.z > 0` | 16-bit PNG |
 //!
 //! Every map must have the same resolution, which is the texel grid's. Parameters without a map
@@ -85,7 +85,9 @@ impl AnyMaterial {
             match *name {
                 "diffuse" => loaded.diffuse = Some(texels.iter().map(|t| t.rgb).collect()),
                 "specular" => loaded.specular = Some(texels.iter().map(|t| t.rgb).collect()),
-                "roughness" => loaded.roughness = Some(texels.iter().map(|t| t.rgb[0]).collect()),
+                "roughness" => {
+                    loaded.roughness = Some(texels.iter().map(|t| [t.rgb[0], t.rgb[1]]).collect())
+                }
                 _ => loaded.normal = Some(texels.iter().map(|t| t.rgb).collect()),
             }
         }
@@ -208,13 +210,14 @@ fn read_map(name: &str, image: &Path) -> Result<(Vec<Texel>, TexelGrid)> {
                     format!("{rgb:?}: expected values in [0, 1]"),
                 ))
             }
-            "roughness" if rgb[0] <= 0.0 => {
+            "roughness" if rgb[0] <= 0.0 || rgb[1] <= 0.0 => {
                 return Err(Error::invalid(
                     image,
                     at(),
                     format!(
-                        "alpha {} must be > 0 (roughness maps store alpha itself)",
-                        rgb[0]
+                        "alpha_x {}, alpha_y {} (red, green) must be > 0 (roughness maps store \
+                         alpha itself)",
+                        rgb[0], rgb[1]
                     ),
                 ))
             }
@@ -324,7 +327,10 @@ impl MaterialMaps {
                     let Some(alpha) = &self.roughness else {
                         continue;
                     };
-                    let rgb: Vec<[f32; 3]> = alpha.iter().map(|&a| [a as f32; 3]).collect();
+                    let rgb: Vec<[f32; 3]> = alpha
+                        .iter()
+                        .map(|&[ax, ay]| [ax, ay, (ax * ay).sqrt()].map(|a| a as f32))
+                        .collect();
                     write_exr(&path, &rgb, width, height)?;
                 }
             }

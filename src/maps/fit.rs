@@ -136,11 +136,13 @@ pub enum Normals {
 #[derive(Clone, Debug)]
 pub struct MapsFitOptions {
     /// Model, distribution, height model and Fresnel (Schlick F0 per texel, or a known
-    /// Fresnel); roughness is isotropic and the diffuse albedo always fitted.
+    /// Fresnel); the diffuse albedo is always fitted.
     pub model: Model,
     pub ndf: crate::microfacet::NdfKind,
     pub height: crate::microfacet::Height,
     pub known_fresnel: Option<FresnelSpec>,
+    /// Fit `alpha_x` and `alpha_y` per texel (else one isotropic `alpha`).
+    pub anisotropic: bool,
     /// Texel grid over the sample.
     pub grid: TexelGrid,
     /// Fit a shading normal per texel: never, always, or where the validation photo says so.
@@ -157,8 +159,12 @@ pub struct MapsFitOptions {
 #[derive(Clone, Debug, Serialize)]
 pub struct Basis {
     pub kind: Kind,
-    /// Roughness of the basis (no lower than the fit's roughness floor).
+    /// Roughness of the basis (no lower than the fit's roughness floor); of an anisotropic
+    /// basis, `sqrt(alpha_x alpha_y)`.
     pub alpha: f64,
+    /// `[alpha_x, alpha_y]` of the basis in an anisotropic fit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub alpha_xy: Option<[f64; 2]>,
     /// Schlick F0 (absent with a known Fresnel).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub f0: Option<[f64; 3]>,
@@ -395,14 +401,25 @@ impl TexelModel<'_> {
         self.space.dim() + if self.normals { 2 } else { 0 }
     }
 
-    /// Number of specular coordinates at the front (`ln alpha`, then `logit F0` RGB unless
+    /// Number of roughness coordinates at the front: `ln alpha`, or `ln alpha_x`, `ln
+    /// alpha_y`.
+    fn roughness_dim(&self) -> usize {
+        if self.space.anisotropic {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// Number of specular coordinates at the front (the roughness, then `logit F0` RGB unless
     /// the Fresnel is known): what the bases hold.
     fn specular_dim(&self) -> usize {
-        if self.space.known_fresnel.is_some() {
-            1
-        } else {
-            4
-        }
+        self.roughness_dim()
+            + if self.space.known_fresnel.is_some() {
+                0
+            } else {
+                3
+            }
     }
 
     /// Predictions of `pixels` at coordinates `x`, at any scalar type.
@@ -634,8 +651,10 @@ impl TexelModel<'_> {
             5 => self.solve::<5, 2>(x, pixels, sigma2, prior),
             6 => self.solve::<6, 3>(x, pixels, sigma2, prior),
             7 => self.solve::<7, 4>(x, pixels, sigma2, prior),
+            8 => self.solve::<8, 5>(x, pixels, sigma2, prior),
             9 => self.solve::<9, 6>(x, pixels, sigma2, prior),
-            n => unreachable!("a maps fit has 4 to 9 coordinates, not {n}"),
+            10 => self.solve::<10, 7>(x, pixels, sigma2, prior),
+            n => unreachable!("a maps fit has 4 to 10 coordinates, not {n}"),
         }
     }
 
@@ -661,8 +680,10 @@ impl TexelModel<'_> {
             5 => parts(self.linearise::<5, 2>(x, pixels, sigma2, prior)),
             6 => parts(self.linearise::<6, 3>(x, pixels, sigma2, prior)),
             7 => parts(self.linearise::<7, 4>(x, pixels, sigma2, prior)),
+            8 => parts(self.linearise::<8, 5>(x, pixels, sigma2, prior)),
             9 => parts(self.linearise::<9, 6>(x, pixels, sigma2, prior)),
-            n => unreachable!("a maps fit has 4 to 9 coordinates, not {n}"),
+            10 => parts(self.linearise::<10, 7>(x, pixels, sigma2, prior)),
+            n => unreachable!("a maps fit has 4 to 10 coordinates, not {n}"),
         }
     }
 
@@ -675,24 +696,26 @@ impl TexelModel<'_> {
         }
     }
 
-    /// The prior of a texel of `kind` whose specular coordinates (`ln alpha`, then `logit F0`
-    /// RGB unless known) are drawn toward `specular` with standard deviations `sigma`; the
-    /// diffuse albedo and slopes as in the module table.
+    /// The prior of a texel of `kind` whose specular coordinates (the roughness, then `logit
+    /// F0` RGB unless known) are drawn toward `specular` with standard deviations `sigma`
+    /// (roughness, F0); the diffuse albedo and slopes as in the module table.
     fn prior(&self, kind: Kind, specular: &[f64], sigma: [f64; 2]) -> Prior {
         let dim = self.dim();
+        let r = self.roughness_dim();
         let (mut centre, mut sd) = (vec![0.0; dim], vec![SIGMA_WEAK; dim]);
-        centre[0] = specular[0];
-        sd[0] = sigma[0];
+        for j in 0..r {
+            (centre[j], sd[j]) = (specular[j], sigma[0]);
+        }
         let diffuse_at = match kind {
-            Kind::Known => 1,
+            Kind::Known => r,
             Kind::Dielectric | Kind::Metal => {
-                for c in 1..4 {
+                for c in r..r + 3 {
                     (centre[c], sd[c]) = match kind {
                         Kind::Dielectric => (specular[c], SIGMA_DIELECTRIC_F0.min(sigma[1])),
                         _ => (specular[c], sigma[1]),
                     };
                 }
-                4
+                r + 3
             }
         };
         if kind == Kind::Metal {
@@ -711,21 +734,25 @@ impl TexelModel<'_> {
     /// Stage 1's prior of `kind`: roughness near 0.3 (weakly), a dielectric's F0 near 0.04, a
     /// metal's F0 anywhere.
     fn generic_prior(&self, kind: Kind) -> Prior {
+        let roughness = vec![GENERIC_ALPHA.ln(); self.roughness_dim()];
         self.prior(
             kind,
-            &self.generic_specular(kind, GENERIC_ALPHA.ln()),
+            &self.generic_specular(kind, &roughness),
             [2.0, SIGMA_WEAK],
         )
     }
 
     /// The specular coordinates a texel of `kind` is drawn toward when nothing else is known
-    /// of its F0: `ln_alpha`, then a dielectric's F0 (0.04) or a metal's 0.5.
-    fn generic_specular(&self, kind: Kind, ln_alpha: f64) -> [f64; 4] {
+    /// of its F0: the roughness coordinates `roughness`, then a dielectric's F0 (0.04) or a
+    /// metal's 0.5.
+    fn generic_specular(&self, kind: Kind, roughness: &[f64]) -> Vec<f64> {
         let f0 = match kind {
             Kind::Dielectric => logit(DIELECTRIC_F0),
             _ => 0.0,
         };
-        [ln_alpha, f0, f0, f0]
+        let mut specular = roughness.to_vec();
+        specular.extend([f0; 3]);
+        specular
     }
 
     /// The prior of a texel of `kind` in a basis of `basis_kind` centred at `centre`: the
@@ -736,7 +763,7 @@ impl TexelModel<'_> {
         if kind == basis_kind {
             self.prior(kind, centre, [SIGMA_LN_ALPHA, SIGMA_LOGIT_F0])
         } else {
-            let specular = self.generic_specular(kind, centre[0]);
+            let specular = self.generic_specular(kind, &centre[..self.roughness_dim()]);
             self.prior(kind, &specular, [SIGMA_LN_ALPHA, SIGMA_WEAK])
         }
     }
@@ -820,6 +847,7 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         known_fresnel: options.known_fresnel,
         ndf: options.ndf,
         height: options.height,
+        anisotropic: options.anisotropic,
         ..ParamSpace::plain(options.model)
     };
     let candidates: &[bool] = match options.normals {
@@ -895,9 +923,15 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
     let first = independent_texels(&model, &blocks);
     tick("texels alone");
     let mut fits = basis_fits(&model, &blocks, &first, bases);
-    fits.texels = with_roughness_floor(&fits.texels, roughness_floor);
+    fits.texels = with_roughness_floor(&fits.texels, model.roughness_dim(), roughness_floor);
+    let floor = roughness_floor.unwrap_or(0.0);
     for basis in &mut fits.bases {
-        basis.alpha = basis.alpha.max(roughness_floor.unwrap_or(0.0));
+        if let Some(xy) = &mut basis.alpha_xy {
+            *xy = xy.map(|a| a.max(floor));
+            basis.alpha = (xy[0] * xy[1]).sqrt();
+        } else {
+            basis.alpha = basis.alpha.max(floor);
+        }
     }
     fill_unseen(&mut fits.texels, &blocks);
     tick(&format!("{bases} bases"));
@@ -956,7 +990,7 @@ fn validated_bases(
         .map(|k| {
             let fits = basis_fits(&held_out, &blocks, &first, k);
             let error_at = |floor: Option<f64>| {
-                let texels = with_roughness_floor(&fits.texels, floor);
+                let texels = with_roughness_floor(&fits.texels, model.roughness_dim(), floor);
                 let predicted = maps_prediction(model, &texels, options.grid, &validation);
                 relative_error(&predicted, records, &validation)
             };
@@ -1076,13 +1110,13 @@ fn basis_fits(
     first: &Independent,
     k: usize,
 ) -> BasisFits {
-    let specular = model.specular_dim();
+    let (specular, roughness) = (model.specular_dim(), model.roughness_dim());
     let sigma2 = first.sigma2;
     let mut texels = first.texels.clone();
     let seen: Vec<usize> = (0..texels.len())
         .filter(|&t| !blocks.of(t).is_empty())
         .collect();
-    let mut clusters = weighted_kmeans(&texels, &seen, specular, k);
+    let mut clusters = weighted_kmeans(&texels, &seen, specular, roughness, k);
     for round in 0..ROUNDS {
         let prior_of =
             |kind: Kind, b: usize| model.basis_prior(kind, clusters.kinds[b], &clusters.centres[b]);
@@ -1134,7 +1168,7 @@ fn basis_fits(
                 })
                 .collect();
         }
-        clusters.recentre(&texels, &seen, specular);
+        clusters.recentre(&texels, &seen, specular, roughness);
     }
     // The bases reported: pooled maximum-likelihood estimates. The texels' priors stay at the
     // weighted means: centred on the pooled estimates they predicted the real captures' held-out
@@ -1151,9 +1185,11 @@ fn basis_fits(
         .enumerate()
         .map(|(c, (centre, &kind))| Basis {
             kind,
-            alpha: centre[0].exp(),
-            f0: (specular == 4)
-                .then(|| [1, 2, 3].map(|j| crate::fit::point::params::sigmoid(centre[j]))),
+            alpha: (centre[..roughness].iter().sum::<f64>() / roughness as f64).exp(),
+            alpha_xy: (roughness == 2).then(|| [centre[0].exp(), centre[1].exp()]),
+            f0: (specular == roughness + 3).then(|| {
+                [0, 1, 2].map(|j| crate::fit::point::params::sigmoid(centre[roughness + j]))
+            }),
             share: clusters.assignment.iter().filter(|&&a| a == c).count() as f64 / total,
         })
         .collect();
@@ -1313,15 +1349,16 @@ struct Clusters {
 
 impl Clusters {
     /// Each centre becomes the precision-weighted mean of its texels' first `dim` coordinates;
-    /// once the bases have kinds, a basis's F0 is that of its texels of its own kind only.
-    fn recentre(&mut self, texels: &[TexelFit], seen: &[usize], dim: usize) {
+    /// once the bases have kinds, a basis's F0 is that of its texels of its own kind only (the
+    /// first `roughness` coordinates come from all its texels).
+    fn recentre(&mut self, texels: &[TexelFit], seen: &[usize], dim: usize, roughness: usize) {
         let k = self.centres.len();
         let mut sums = vec![vec![0.0; dim]; k];
         let mut weights = vec![vec![0.0; dim]; k];
         for &t in seen {
             let c = self.assignment[t];
             let own_kind = self.kinds.get(c).is_none_or(|&kind| kind == texels[t].kind);
-            for j in 0..if own_kind { dim } else { 1 } {
+            for j in 0..if own_kind { dim } else { roughness } {
                 let w = texels[t].precision[j].max(1e-9);
                 sums[self.assignment[t]][j] += w * texels[t].x[j];
                 weights[self.assignment[t]][j] += w;
@@ -1339,8 +1376,15 @@ impl Clusters {
 
 /// Weighted k-means: centres of `dim` leading coordinates, each texel's coordinate weighted by
 /// its data precision; deterministic farthest-point start from the most precise texel. A
-/// basis is of the kind most of its texels are.
-fn weighted_kmeans(texels: &[TexelFit], seen: &[usize], dim: usize, k: usize) -> Clusters {
+/// basis is of the kind most of its texels are. The first `roughness` coordinates are the
+/// roughness ([`Clusters::recentre`]).
+fn weighted_kmeans(
+    texels: &[TexelFit],
+    seen: &[usize],
+    dim: usize,
+    roughness: usize,
+    k: usize,
+) -> Clusters {
     let distance = |t: usize, centre: &[f64]| -> f64 {
         (0..dim)
             .map(|j| texels[t].precision[j].max(1e-9) * (texels[t].x[j] - centre[j]).powi(2))
@@ -1387,7 +1431,7 @@ fn weighted_kmeans(texels: &[TexelFit], seen: &[usize], dim: usize, k: usize) ->
             .collect();
         let changed = next != clusters.assignment;
         clusters.assignment = next;
-        clusters.recentre(texels, seen, dim);
+        clusters.recentre(texels, seen, dim, roughness);
         if !changed {
             break;
         }
@@ -1412,13 +1456,20 @@ fn weighted_kmeans(texels: &[TexelFit], seen: &[usize], dim: usize, k: usize) ->
     clusters
 }
 
-/// `texels` with no roughness below `floor` (the first coordinate is `ln alpha`); the other
-/// coordinates are kept as fitted.
-fn with_roughness_floor(texels: &[TexelFit], floor: Option<f64>) -> Vec<TexelFit> {
+/// `texels` with no roughness below `floor` along any axis (the first `roughness` coordinates
+/// are `ln alpha`, or `ln alpha_x` and `ln alpha_y`); the other coordinates are kept as
+/// fitted.
+fn with_roughness_floor(
+    texels: &[TexelFit],
+    roughness: usize,
+    floor: Option<f64>,
+) -> Vec<TexelFit> {
     let mut floored = texels.to_vec();
     if let Some(floor) = floor {
         for texel in &mut floored {
-            texel.x[0] = texel.x[0].max(floor.ln());
+            for x in &mut texel.x[..roughness] {
+                *x = x.max(floor.ln());
+            }
         }
     }
     floored
@@ -1460,7 +1511,7 @@ fn to_maps(model: &TexelModel, options: &MapsFitOptions, texels: &[TexelFit]) ->
             .known_fresnel
             .is_none()
             .then(|| materials.iter().map(|m| m.fresnel.f0()).collect()),
-        roughness: Some(materials.iter().map(|m| m.alpha[0]).collect()),
+        roughness: Some(materials.iter().map(|m| m.alpha).collect()),
         normal: model.normals.then(|| {
             texels
                 .iter()

@@ -5,7 +5,7 @@
 //! | --- | --- | --- |
 //! | `diffuse` | Lambertian albedo, linear RGB in [0, 1] | `diffuse` of the uniform material |
 //! | `specular` | Schlick F0, linear RGB in [0, 1] | `fresnel` (Schlick) of the uniform material |
-//! | `roughness` | microfacet `alpha` > 0 (isotropic; not perceptual roughness) | `alpha` |
+//! | `roughness` | microfacet `alpha` > 0 along the sample's x and y (not perceptual roughness; equal for an isotropic texel) | `alpha` |
 //! | `normal` | unit shading normal in tangent space (`x` along the sample's +x, `y` along +y, `z` out of the surface) | the frame the BRDF is evaluated in |
 //!
 //! A parameter without a map takes the material file's uniform value, so a uniform material
@@ -65,8 +65,8 @@ pub struct MaterialMaps {
     pub diffuse: Option<Vec<[f64; 3]>>,
     /// Per texel Schlick F0 (replaces `base.fresnel`).
     pub specular: Option<Vec<[f64; 3]>>,
-    /// Per texel isotropic `alpha`.
-    pub roughness: Option<Vec<f64>>,
+    /// Per texel `[alpha_x, alpha_y]` (equal where the texel is isotropic).
+    pub roughness: Option<Vec<[f64; 2]>>,
     /// Per texel unit shading normal, tangent space.
     pub normal: Option<Vec<[f64; 3]>>,
 }
@@ -97,9 +97,24 @@ impl MaterialMaps {
             material.fresnel = FresnelSpec::Schlick { f0: specular[t] };
         }
         if let Some(roughness) = &self.roughness {
-            material.alpha = [roughness[t]; 2];
+            material.alpha = roughness[t];
         }
         material
+    }
+
+    /// Texel `t`'s roughness as one number: `sqrt(alpha_x alpha_y)`, at which the albedo
+    /// tables read an anisotropic surface (`alpha` where isotropic).
+    pub fn alpha(&self, t: usize) -> f64 {
+        let [ax, ay] = self.texel(t).alpha;
+        (ax * ay).sqrt()
+    }
+
+    /// Whether some texel's roughness differs along x and y.
+    pub fn is_anisotropic(&self) -> bool {
+        match &self.roughness {
+            Some(roughness) => roughness.iter().any(|[ax, ay]| ax != ay),
+            None => self.base.alpha[0] != self.base.alpha[1],
+        }
     }
 
     /// The shading normal of texel `t`, if the material has a normal map.

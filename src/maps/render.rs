@@ -144,8 +144,14 @@ mod tests {
 
     #[test]
     fn each_half_of_a_two_texel_map_renders_as_its_own_material() {
+        // The right half is anisotropic: its texel's alpha_x and alpha_y reach the kernel as
+        // the uniform material's do.
         let records = ShadingRecords::build(&flash_capture(16), 1, false).unwrap();
-        let (left, right) = (material(0.15, 0.9, 0.0), material(0.7, 0.3, 0.5));
+        let left = material(0.15, 0.9, 0.0);
+        let right = Material {
+            alpha: [0.7, 0.2],
+            ..material(0.7, 0.3, 0.5)
+        };
         let maps = MaterialMaps {
             grid: TexelGrid {
                 width: 2,
@@ -153,7 +159,7 @@ mod tests {
             },
             diffuse: Some(vec![left.diffuse, right.diffuse]),
             specular: Some(vec![[0.9; 3], [0.3; 3]]),
-            roughness: Some(vec![0.15, 0.7]),
+            roughness: Some(vec![[0.15; 2], [0.7, 0.2]]),
             ..MaterialMaps::uniform(&left)
         };
         let all: Vec<usize> = (0..records.pixel_count()).collect();

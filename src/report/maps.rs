@@ -109,8 +109,8 @@ fn map_colour(maps: &MaterialMaps, map: &str, t: usize) -> [u8; 3] {
         "diffuse" => maps.diffuse.as_ref().map(|d| d[t].map(srgb8)),
         "specular" => maps.specular.as_ref().map(|s| s[t].map(srgb8)),
         "roughness" => maps.roughness.as_ref().map(|a| {
-            let grey = (a[t].clamp(0.0, 1.0) * 255.0).round() as u8;
-            [grey; 3]
+            let [ax, ay] = a[t];
+            [ax, ay, (ax * ay).sqrt()].map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
         }),
         _ => maps
             .normal
@@ -149,7 +149,7 @@ pub fn write_maps_image(root: &Path, fits: &[(Model, &MaterialMaps)]) -> Result<
         columns,
         cell: [grid.width, grid.height],
         gap: GAP,
-        encoding: "diffuse and specular (F0): linear value as sRGB; roughness: grey level = alpha (black 0, white 1 and above); normal: (n + 1) / 2 per channel; dark grey: no such map",
+        encoding: "diffuse and specular (F0): linear value as sRGB; roughness: grey level = alpha (black 0, white 1 and above; anisotropic: alpha_x in red, alpha_y in green); normal: (n + 1) / 2 per channel; dark grey: no such map",
     })
 }
 
@@ -331,11 +331,9 @@ impl Page for MapsReport {
                 ));
             }
             let mean_alpha = |m: &MapsModelRow| {
-                m.maps_fit
-                    .maps
-                    .roughness
-                    .as_ref()
-                    .map_or(f64::NAN, |a| a.iter().sum::<f64>() / a.len() as f64)
+                m.maps_fit.maps.roughness.as_ref().map_or(f64::NAN, |a| {
+                    a.iter().map(|[ax, ay]| (ax * ay).sqrt()).sum::<f64>() / a.len() as f64
+                })
             };
             let alpha_of = |model: Model| {
                 self.models

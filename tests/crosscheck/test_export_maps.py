@@ -7,7 +7,10 @@ The maps material is made here in the encodings of src/maps/files.rs: a 32 x 32 
 four quadrants, each its own material, so that a texture read upside down or mirrored renders a
 different material: top left (row 0, +y edge; column 0, -x edge) a copper-like metal, top right
 an orange dielectric, bottom left a blue dielectric with a tinted F0, bottom right a rough grey
-metal whose shading normals lean towards +x and -y. The Mitsuba comparison is that of
+metal whose shading normals lean towards +x and -y. The anisotropic variant stretches the
+copper's roughness along x (alpha 0.3 by 0.1) and the tilted grey metal's along y (0.25 by
+0.7), so a swapped axis, a tangent that does not follow the shading normal's frame or a
+rotation the wrong way renders a different lobe. The Mitsuba comparison is that of
 test_render_mitsuba.py (mean relative difference over the pixels wholly on the sample, all
 photos and channels); `height: uncorrelated` is Mitsuba's G2.
 """
@@ -39,6 +42,8 @@ QUADRANTS = [
     ((0.05, 0.04, 0.03), (0.1, 0.35, 0.6), 0.5, (0.0, 0.0)),
     ((0.9, 0.9, 0.9), (0.0, 0.0, 0.0), 0.6, (-0.25, 0.15)),
 ]
+# (alpha_x, alpha_y) per quadrant of the anisotropic variant.
+ANISOTROPIC = [(0.3, 0.1), (0.15, 0.15), (0.5, 0.5), (0.25, 0.7)]
 
 
 def write_png16(path, rgb):
@@ -47,16 +52,18 @@ def write_png16(path, rgb):
     assert cv2.imwrite(str(path), codes[..., ::-1])
 
 
-@pytest.fixture
-def maps_material(tmp_path):
-    """The four-quadrant maps material file (module docs) in tmp_path."""
+@pytest.fixture(params=[False, True], ids=["isotropic", "anisotropic"])
+def maps_material(request, tmp_path):
+    """The four-quadrant maps material file (module docs) in tmp_path, isotropic or not."""
+    anisotropic = request.param
     half = SIDE // 2
     grids = {name: np.zeros((SIDE, SIDE, 3)) for name in ("specular", "diffuse", "roughness", "normal")}
     for index, (f0, diffuse, alpha, (p, q)) in enumerate(QUADRANTS):
         rows = slice(0, half) if index < 2 else slice(half, SIDE)
         columns = slice(0, half) if index % 2 == 0 else slice(half, SIDE)
         normal = np.array([-p, -q, 1.0]) / np.linalg.norm([-p, -q, 1.0])
-        for name, value in (("specular", f0), ("diffuse", diffuse), ("roughness", (alpha,) * 3),
+        ax, ay = ANISOTROPIC[index] if anisotropic else (alpha, alpha)
+        for name, value in (("specular", f0), ("diffuse", diffuse), ("roughness", (ax, ay, ay)),
                             ("normal", 0.5 * normal + 0.5)):
             grids[name][rows, columns] = value
     folder = tmp_path / "quadrants.maps"
@@ -72,6 +79,12 @@ def maps_material(tmp_path):
     path = tmp_path / "quadrants.json"
     path.write_text(json.dumps(material))
     return path
+
+
+def is_anisotropic(material):
+    """Whether the maps material file `material` has texels rougher along one axis."""
+    roughness = read_exr(material.parent / "quadrants.maps" / "roughness.exr")
+    return bool((roughness[..., 0] != roughness[..., 1]).any())
 
 
 def validate_gltf(path):
@@ -95,9 +108,13 @@ def test_gltf_export_of_maps_validates(tmp_path, maps_material):
     errors = [m for m in issues["messages"] if m["severity"] == 0]
     assert issues["numErrors"] == 0, errors
     info = result["info"]
-    # base colour, metallic-roughness, specular colour (tinted dielectric F0), normal
-    assert info["hasTextures"] and len(result["info"]["resources"]) >= 5
+    # base colour, metallic-roughness, specular colour (tinted dielectric F0), normal, and for
+    # anisotropic maps the anisotropy texture
+    anisotropic = is_anisotropic(maps_material)
+    assert info["hasTextures"] and len(result["info"]["resources"]) >= 5 + anisotropic
     assert info["totalTriangleCount"] == 2 and info["drawCallCount"] == 1
+    material = json.loads(out.read_text())["materials"][0]
+    assert ("KHR_materials_anisotropy" in material.get("extensions", {})) == anisotropic
 
 
 def test_materialx_export_of_maps_validates(tmp_path, maps_material):
@@ -111,14 +128,24 @@ def test_materialx_export_of_maps_validates(tmp_path, maps_material):
     valid, message = document.validate()
     assert valid, message
     images = {node.getName(): node.getInputValue("file") for node in document.getNodes("image")}
-    assert set(images) == {"base_color_image", "metallic_roughness_image", "specular_color_image", "normal_image"}
+    expected = {"base_color_image", "metallic_roughness_image", "specular_color_image", "normal_image"}
+    anisotropic = is_anisotropic(maps_material)
+    if anisotropic:
+        expected |= {"standard_surface_roughness_image", "open_pbr_roughness_image", "tangent_image"}
+    assert set(images) == expected
     for file in images.values():
         assert (tmp_path / file).is_file(), file
-    for shader in ("SR_bouncefit_standard_surface", "SR_bouncefit_open_pbr_surface"):
+    roughness = {
+        "SR_bouncefit_standard_surface": "standard_surface_roughness" if anisotropic else "roughness",
+        "SR_bouncefit_open_pbr_surface": "open_pbr_roughness" if anisotropic else "roughness",
+    }
+    for shader, node_name in roughness.items():
         node = document.getNode(shader)
         assert node.getNodeDef() is not None, shader
         assert node.getInput("base_color").getNodeName() == "base_color_image"
-        assert node.getInput("specular_roughness").getNodeName() == "roughness"
+        assert node.getInput("specular_roughness").getNodeName() == node_name
+    tangent = document.getNode("SR_bouncefit_open_pbr_surface").getInput("geometry_tangent")
+    assert (tangent is not None and tangent.getNodeName() == "tangent_image") == anisotropic
 
 
 @pytest.mark.parametrize("capture", ["copper-flash", "aluminium-pinhole"])
