@@ -652,7 +652,7 @@ fn maps_files_round_trip_and_bad_maps_are_refused_by_file_and_field() {
 }
 
 #[test]
-fn maps_fits_refuse_stochastic_models_and_a_missing_holdout_photo() {
+fn maps_fits_refuse_stochastic_models_options_they_would_ignore_and_a_missing_holdout_photo() {
     let set = repo("datasets/copper-flash");
     let out = tempfile::tempdir().unwrap();
     let fit = out.path().join("f.json");
@@ -669,6 +669,10 @@ fn maps_fits_refuse_stochastic_models_and_a_missing_holdout_photo() {
     };
     assert!(args(&["--models", "bitterli"]).contains("bitterli is stochastic"));
     assert!(args(&["--holdout-photo", "9"]).contains("--holdout-photo: photo 9 does not exist"));
+    // Options a maps fit has no use for are refused, not ignored.
+    assert!(args(&["--fresnel", "conductor"]).contains("--fresnel: a maps fit takes Schlick F0"));
+    assert!(args(&["--loss", "log-l1"]).contains("--loss: a maps fit minimises"));
+    assert!(args(&["--mcmc"]).contains("--mcmc: a maps fit reports maximum a posteriori maps"));
     assert!(!fit.exists() && !out.path().join("f.maps").exists());
 }
 

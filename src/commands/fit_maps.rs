@@ -11,6 +11,8 @@ use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::fit_model;
 use crate::fit::point::exposure::exposed_records;
+use crate::fit::point::params::FresnelFamily;
+use crate::loss::LossKind;
 use crate::maps::fit::{fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions, Normals};
 use crate::maps::render::render_maps;
 use crate::maps::{MaterialMaps, TexelGrid};
@@ -69,6 +71,13 @@ pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
             "a maps fit takes one model (compare maps of several with `compare --maps`)",
         ));
     };
+    if args.mcmc.mcmc {
+        return Err(Error::argument(
+            "--mcmc",
+            "a maps fit reports maximum a posteriori maps; the posterior sampler is for uniform \
+             fits (drop --maps, or --mcmc)",
+        ));
+    }
     let capture = args.options.real.open(&args.capture)?;
     let output = output_path(args, &capture)?;
     let maps_folder = StagedFolder::new(&MaterialMaps::folder_beside(&output), args.force)?;
@@ -129,6 +138,27 @@ pub struct MapsRun {
     pub holdout: Option<HeldOutPhoto>,
 }
 
+/// Refuses the fit options that would change what maps are fitted but that a maps fit has no
+/// use for: it fits Schlick F0 per texel (or the known Fresnel) by its own weighted squared
+/// error ([`crate::maps::fit`]). Before, it ignored them without a word.
+fn check_options(options: &FitOptionArgs) -> Result<()> {
+    if options.fresnel != FresnelFamily::Schlick && options.real.fresnel_known.is_none() {
+        return Err(Error::argument(
+            "--fresnel",
+            "a maps fit takes Schlick F0 per texel; for maps of a known conductor give \
+             --fresnel-known conductor:ETA:K",
+        ));
+    }
+    if options.loss != LossKind::L2 {
+        return Err(Error::argument(
+            "--loss",
+            "a maps fit minimises the weighted squared error (l2); the other losses are for \
+             uniform fits",
+        ));
+    }
+    Ok(())
+}
+
 impl MapsSet {
     /// Loads the records of `capture` and checks the maps options against it (the held-out
     /// photo exists, enough photos remain to fit); nothing is fitted yet.
@@ -138,6 +168,7 @@ impl MapsSet {
         options: &FitOptionArgs,
         maps: &MapsArgs,
     ) -> Result<MapsSet> {
+        check_options(options)?;
         // One sub-sample per pixel, its centre: each pixel then sees exactly one texel.
         let options = FitOptionArgs {
             pixel_samples: 1,
