@@ -18,8 +18,9 @@
 //! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; each texel as either kind (a texel of the basis's other kind takes only its roughness), from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own; the texels' priors are centred on the precision-weighted means of their basis's texels, and the bases reported are then re-estimated by maximum likelihood on the photos of their texels of their kind together (Gauss-Newton, each texel with its own albedo, [`pooled_centre`]), since that mean is biased low under noise |
 //! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels; the fewest bases within 2% of the best error are kept, with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
 //!
-//! Texels are independent given the bases, so each is a small dense problem (4 to 9
-//! coordinates: `ln alpha`, `logit F0` RGB unless the Fresnel is known, `logit diffuse` RGB,
+//! Texels are independent given the bases, so each is a small dense problem (4 to 10
+//! coordinates: `ln alpha` (with `anisotropic`, `ln alpha_x` and `ln alpha_y`, each with the
+//! prior of `ln alpha`), `logit F0` RGB unless the Fresnel is known, `logit diffuse` RGB,
 //! and with `normals` two slopes) solved with exact dual-number Jacobians
 //! (`DualSVec64<N>`) through the model's own generic kernel, in parallel over texels and
 //! bit-identical for any thread count. A pixel belongs to the texel its centre sees and is
