@@ -75,6 +75,7 @@ use crate::microfacet::{Height, NdfKind};
 use crate::scalar::{Real, Rgb, Vec3};
 use std::sync::OnceLock;
 use vertex_fresnel::OrderFresnel;
+pub use vertex_fresnel::SchlickOrders;
 
 mod vertex_fresnel;
 
@@ -276,19 +277,60 @@ impl<T: Real> Tabulated<T> {
 
     /// The multiple-bounce lobe, 1/sr, at directions prepared by [`LobeDirections::new`].
     pub fn multiple_at(&self, directions: &LobeDirections) -> Rgb<T> {
+        let (values, white) = self.white_orders(directions);
+        let [xi, xo] = directions.warped;
+        self.fresnel.weigh(xi, xo, values).scale(white)
+    }
+
+    /// What the lobe at `directions` is before its Fresnel weights: the table's `T_k` per
+    /// order group, interpolated in roughness, and the white lobe `f_kc` they multiply.
+    fn white_orders(&self, directions: &LobeDirections) -> ([T; ORDERS], T) {
         let LobeDirections {
             cells,
-            warped: [xi, xo],
             mu_cells: [mu_i, mu_o],
+            ..
         } = *directions;
         let (i, t) = self.alpha_cell;
         let below = self.table.directional(i, cells);
         let above = self.table.directional(i + 1, cells);
         let values = std::array::from_fn(|k| T::c(below[k]) + T::c(above[k] - below[k]) * t);
-        let sum = self.fresnel.weigh(xi, xo, values);
         let lost =
             |mu_cell| (T::one() - self.albedo.e_in_cells(mu_cell, self.albedo_cell)).max_c(0.0);
-        sum.scale(lost(mu_i) * lost(mu_o) * self.scale)
+        (values, lost(mu_i) * lost(mu_o) * self.scale)
+    }
+}
+
+impl Tabulated<f64> {
+    /// The Fresnel weights of a Schlick `F0` at this roughness as functions of `F0`, for
+    /// [`Tabulated::schlick_orders_at`].
+    pub fn schlick_orders(&self) -> SchlickOrders {
+        SchlickOrders::new(self.single.microfacet.ndf, self.alpha_cell)
+    }
+
+    /// The multiple-bounce lobe at `directions` for a Schlick Fresnel, split so that `F0`
+    /// can vary: per order group `g`, the coefficients `[q0, q1, q2]` of a quadratic in `F0`
+    /// that does not depend on the channel, so that the lobe of a channel with Schlick `F0`
+    /// is `sum_g inner_g(F0) (q0 + q1 F0 + q2 F0^2)` with `inner` = 1, `F_mid,3` and the tail
+    /// factor of [`SchlickOrders`] (`orders`, from [`Tabulated::schlick_orders`]). The product
+    /// `(m_i + (1 - m_i) F0)(m_o + (1 - m_o) F0)` of the two end weights gives the quadratic
+    /// ([`vertex_fresnel`]'s derivation). This lobe's own Fresnel is not read.
+    pub fn schlick_orders_at(
+        &self,
+        directions: &LobeDirections,
+        orders: &SchlickOrders,
+    ) -> [[f64; 3]; ORDERS] {
+        let (values, white) = self.white_orders(directions);
+        let [xi, xo] = directions.warped;
+        let (mi, mo) = (orders.end_moments(xi), orders.end_moments(xo));
+        std::array::from_fn(|g| {
+            let v = values[g] * white;
+            let (a, b) = (mi[g], mo[g]);
+            [
+                v * a * b,
+                v * (a * (1.0 - b) + b * (1.0 - a)),
+                v * (1.0 - a) * (1.0 - b),
+            ]
+        })
     }
 }
 

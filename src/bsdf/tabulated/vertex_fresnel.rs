@@ -199,6 +199,17 @@ impl VertexCosines {
         }
     }
 
+    /// `P(k | k >= 4)` for `k = 4, 5, ...` at roughness node `i`, linear in `t` toward node
+    /// `i + 1`, up to the longest order either node saw.
+    fn order_distribution<T: Real>(&self, i: usize, t: T) -> Vec<T> {
+        let (lo, hi) = (tail_index(i), tail_index(i + 1));
+        (0..self.tail_len[i].max(self.tail_len[i + 1]))
+            .map(|n| {
+                T::c(self.values[lo + n]) + T::c(self.values[hi + n] - self.values[lo + n]) * t
+            })
+            .collect()
+    }
+
     /// [`VertexCosines::mean`] for any Fresnel, from its values at the cosine nodes.
     pub(super) fn mean_at_nodes<T: Real>(
         &self,
@@ -216,6 +227,27 @@ impl VertexCosines {
             }
         }
     }
+}
+
+/// The entry node below warped polar coordinate `x` (`super::warped_x`; the nodes sit at
+/// `x = j / (END_THETA_COUNT - 1)`) and the weight of the one above, linear in `x`.
+fn entry_cell(x: f64) -> (usize, f64) {
+    let s = x.clamp(0.0, 1.0) * (END_THETA_COUNT - 1) as f64;
+    let j = (s as usize).min(END_THETA_COUNT - 2);
+    (j, s - j as f64)
+}
+
+/// The inner factor of the orders >= 4, `sum_k P(k | k >= 4) F_mid^(k - 2)`, from the inner
+/// vertices' mean Fresnel `later` and the order distribution `orders`
+/// ([`VertexCosines::order_distribution`]): the powers built up from `F_mid^2` at `k = 4`.
+fn tail_factor<T: Real>(later: T, orders: &[T]) -> T {
+    let mut power = later * later;
+    let mut tail = T::zero();
+    for &p in orders {
+        tail += power * p;
+        power *= later;
+    }
+    tail
 }
 
 /// The per-order Fresnel weights of one material: `F_end` at the entry nodes and the inner
@@ -257,20 +289,9 @@ impl<T: Real> OrderFresnel<T> {
         let mut later = zero;
         mean((middle_index(i, 0), middle_stride), &mut inner[1]);
         mean((middle_index(i, 1), middle_stride), &mut later);
-        // sum_k P(k | k >= 4) F_mid^(k - 2), the powers built up from F_mid^2 at k = 4, up to
-        // the longest order either roughness node saw.
-        let (lo, hi) = (tail_index(i), tail_index(i + 1));
-        let orders: Vec<T> = (0..data.tail_len[i].max(data.tail_len[i + 1]))
-            .map(|n| {
-                T::c(data.values[lo + n]) + T::c(data.values[hi + n] - data.values[lo + n]) * t
-            })
-            .collect();
+        let orders = data.order_distribution(i, t);
         for (tail, &f) in inner[2].0.iter_mut().zip(&later.0) {
-            let mut power = f * f;
-            for &p in &orders {
-                *tail += power * p;
-                power *= f;
-            }
+            *tail = tail_factor(f, &orders);
         }
         let mut entered = ends.clone();
         for end in &mut entered {
@@ -289,9 +310,8 @@ impl<T: Real> OrderFresnel<T> {
     /// arrays of weights passed by value cost more in copies than in arithmetic.
     pub fn weigh(&self, xi: f64, xo: f64, values: [T; ORDERS]) -> Rgb<T> {
         let cell = |x: f64| {
-            let s = x.clamp(0.0, 1.0) * (END_THETA_COUNT - 1) as f64;
-            let j = (s as usize).min(END_THETA_COUNT - 2);
-            (j, T::c(1.0 - (s - j as f64)), T::c(s - j as f64))
+            let (j, u) = entry_cell(x);
+            (j, T::c(1.0 - u), T::c(u))
         };
         let ((ji, ai, bi), (jo, ao, bo)) = (cell(xi), cell(xo));
         let mut out = [T::zero(); 3];
@@ -303,5 +323,66 @@ impl<T: Real> OrderFresnel<T> {
             }
         }
         Rgb(out)
+    }
+}
+
+/// The weights of [`OrderFresnel`] for a Schlick Fresnel of any `F0`, as functions of `F0`:
+/// what the fitter's variable projection needs to solve `F0` in closed form
+/// ([`crate::fit::point::projection`]).
+///
+/// Schlick's mean over any cosine distribution is `m + (1 - m) F0`, with `m = sum_b p_b
+/// (1 - mu_b)^5` the distribution's moment. So `F_end` at an entry angle is affine in `F0`, and
+/// the weight of group `g` is `inner_g(F0) (m_i + (1 - m_i) F0) (m_o + (1 - m_o) F0)`: a
+/// quadratic in `F0` whose coefficients depend on the directions, times an inner factor that
+/// does not (1; `F_mid,3`, affine; the tail sum of the orders >= 4).
+pub struct SchlickOrders {
+    /// The moment `m` of the first-vertex distribution per entry node and order group.
+    ends: [[f64; ORDERS]; END_THETA_COUNT],
+    /// The moments of the inner vertices' distributions: order 3, orders >= 4.
+    middles: [f64; 2],
+    /// `P(k | k >= 4)` for `k = 4, 5, ...`.
+    orders: Vec<f64>,
+}
+
+impl SchlickOrders {
+    /// The moments for distribution `ndf` at roughness cell `(i, t)` of the table's grid.
+    pub fn new(ndf: NdfKind, (i, t): (usize, f64)) -> SchlickOrders {
+        let data = VertexCosines::get(ndf);
+        // Schlick's mean at F0 = 0 is the moment itself.
+        let zero = Fresnel::Schlick {
+            f0: Rgb::splat(0.0),
+        };
+        let moment = |start: usize, stride: usize| {
+            let mut out = Rgb::splat(0.0);
+            data.mean(&zero, &[], (start, stride), t, &mut out);
+            out.0[0]
+        };
+        let alpha_stride = end_index(1, 0, 0);
+        let middle_stride = middle_index(1, 0) - middle_index(0, 0);
+        SchlickOrders {
+            ends: std::array::from_fn(|j| {
+                std::array::from_fn(|g| moment(end_index(i, j, g), alpha_stride))
+            }),
+            middles: [0, 1].map(|g| moment(middle_index(i, g), middle_stride)),
+            orders: data.order_distribution(i, t),
+        }
+    }
+
+    /// The moment `m` of each order group's first (or, by reciprocity, last) vertex at warped
+    /// polar coordinate `x`, interpolated as [`OrderFresnel::weigh`] interpolates `F_end`.
+    pub fn end_moments(&self, x: f64) -> [f64; ORDERS] {
+        let (j, u) = entry_cell(x);
+        std::array::from_fn(|g| self.ends[j][g] * (1.0 - u) + self.ends[j + 1][g] * u)
+    }
+
+    /// The moment of the inner vertices of order 3: `F_mid,3 = m + (1 - m) F0`.
+    pub fn middle_moment(&self) -> f64 {
+        self.middles[0]
+    }
+
+    /// The inner factor of the orders >= 4 at `f0`: `sum_k P(k | k >= 4) F_mid^(k - 2)`.
+    pub fn tail_factor(&self, f0: f64) -> f64 {
+        let m = self.middles[1];
+        tail_factor(m + (1.0 - m) * f0, &self.orders)
     }
 }

@@ -17,6 +17,7 @@
 
 use super::params::ParamSpace;
 use crate::bsdf::single::SingleBounce;
+use crate::bsdf::tabulated::{LobeDirections, SchlickOrders, Tabulated};
 use crate::bsdf::ScalarBrdf;
 use crate::bsdf::{differentiable, BounceCap, Model};
 use crate::fit::point::params::Surface;
@@ -372,6 +373,77 @@ impl<'a> Objective<'a> {
                 .iter()
                 .map(|&seed| self.anchored_values_of(brdf.as_ref(), anchors, seed))
                 .collect(),
+        })
+    }
+
+    /// For `tabulated` with a Schlick Fresnel at `x`, where the plan renders its
+    /// multiple-bounce term (from anchors or at every sub-sample): the render split so that
+    /// the Schlick F0 can vary ([`OrderParts`]), unexposed and without diffuse. `None` for
+    /// other models and Fresnels, where the plan skips the term as faint (the prediction is
+    /// then the single bounce, affine in F0), or where the space fits an exposure.
+    pub fn order_parts(&self, x: &[f64]) -> Option<OrderParts<'_>> {
+        if self.space.model != Model::Tabulated || self.space.exposure {
+            return None;
+        }
+        let single = self.space.material(x).single::<f64>();
+        if !matches!(single.fresnel, crate::microfacet::Fresnel::Schlick { .. }) {
+            return None;
+        }
+        let anchors = match self.plan().multi_term(&single) {
+            MultiTerm::Sparse(anchors) => Some(anchors),
+            MultiTerm::Exact => None,
+            MultiTerm::Skipped => return None,
+        };
+        let lobe = Tabulated::new(single);
+        let orders = lobe.schlick_orders();
+        // The channel-free parts at one direction pair, flattened `[g][k]` -> `3 g + k`.
+        let parts_at = |wi: [f64; 3], wo: [f64; 3]| -> [f64; ORDER_PARTS] {
+            LobeDirections::new(wi, wo).map_or([0.0; ORDER_PARTS], |d| {
+                let q = lobe.schlick_orders_at(&d, &orders);
+                std::array::from_fn(|j| q[j / 3][j % 3])
+            })
+        };
+        let multi = anchors.map_or_else(Vec::new, |anchors| {
+            anchors
+                .points
+                .par_iter()
+                .map(|a| {
+                    let q = parts_at(a.wi, a.wo);
+                    std::array::from_fn(|i| q[i / 3])
+                })
+                .collect()
+        });
+        // The pixels without anchors: their sub-samples summed as `render_model` sums them.
+        let spp = self.records.samples_per_pixel;
+        let exact_slots: Vec<usize> = (0..self.pixels.len())
+            .filter(|&k| anchors.is_none_or(|a| a.corners[k].is_none()))
+            .collect();
+        let exact = exact_slots
+            .par_iter()
+            .map(|&k| {
+                let p = self.pixels[k];
+                let mut sum = [0.0; 3 * ORDER_PARTS];
+                for s in p * spp..(p + 1) * spp {
+                    let e = self.records.irradiance[s];
+                    if e == [0.0; 3] {
+                        continue;
+                    }
+                    let q = parts_at(self.records.wi[s], self.records.wo[s]);
+                    for (i, v) in sum.iter_mut().enumerate() {
+                        *v += q[i / 3] * e[i % 3];
+                    }
+                }
+                (k, sum.map(|v| v / spp as f64))
+            })
+            .collect();
+        let batch = self.batch();
+        Some(OrderParts {
+            single: batch.render_affine_in_f0(&single, [0.0; 3]),
+            anchors,
+            lambert: batch.lambert(),
+            multi,
+            exact,
+            orders,
         })
     }
 
@@ -800,6 +872,33 @@ pub struct AnchoredRender<'o> {
     pub shared: Option<Vec<[[f64; 2]; 3]>>,
     /// Per seed: the anchors' values and the pixels without anchors.
     pub streams: Vec<AnchoredValues<f64>>,
+}
+
+/// Channel-free parts of `tabulated`'s multiple-bounce lobe at one direction pair: per order
+/// group (2, 3, >= 4) the three coefficients of a quadratic in a Schlick F0
+/// ([`Tabulated::schlick_orders_at`]).
+pub const ORDER_PARTS: usize = 9;
+
+/// A `tabulated` render split so that its Schlick F0 can vary ([`Objective::order_parts`]):
+/// a channel with F0 `f` renders `A + B f + sum_g inner_g(f) (q_g0 + q_g1 f + q_g2 f^2)`.
+pub struct OrderParts<'o> {
+    /// The single bounce at every loss pixel, affine in F0: `[A, B]` per channel.
+    pub single: Vec<[[f64; 2]; 3]>,
+    /// The anchors the multiple-bounce term is interpolated from, or `None` where every pixel
+    /// is evaluated exactly.
+    pub anchors: Option<&'o Anchors>,
+    /// Per loss pixel: its white Lambertian radiance, by which [`interpolate`] scales the
+    /// anchors.
+    pub lambert: &'o [[f64; 3]],
+    /// Per anchor: the parts at its geometry, part `j` of channel `c` at `3 j + c` (the same
+    /// for every channel), laid out for [`interpolate`].
+    pub multi: Vec<[f64; 3 * ORDER_PARTS]>,
+    /// The pixels without anchors (position in the pixel list) in increasing order, with their
+    /// parts summed over their sub-samples and weighted by each channel's irradiance, laid out
+    /// as `multi`.
+    pub exact: Vec<(usize, [f64; 3 * ORDER_PARTS])>,
+    /// The inner factors, which do not depend on the pixel.
+    pub orders: SchlickOrders,
 }
 
 /// The parts of a `kulla-conty` render ([`Objective::compensation_parts`]), per loss pixel.
