@@ -15,13 +15,15 @@
 //! exact; for the stochastic models it is a polynomial approximation in F0. The fitter always finishes with a joint
 //! search over all coordinates from the projected optimum.
 
-use super::objective::{interpolate, Objective, OrderParts};
+use super::objective::{interpolate, Objective, OrderParts, ORDER_PARTS};
 use super::params::{logit, sigmoid, FresnelFamily};
 use crate::bsdf::kulla_conty::KullaConty;
+use crate::bsdf::tabulated::SchlickOrders;
 use crate::bsdf::Model;
 use crate::render::anchors::Anchors;
 use crate::render::lambertian_pixels;
 use rayon::prelude::*;
+use std::f64::consts::PI;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Degree in F0 of the prediction's polynomial model (see the module docs).
@@ -52,22 +54,23 @@ enum NodeRenders<'o> {
         renders: Vec<Vec<Vec<[f64; 3]>>>,
         lagrange: &'o [[f64; MAX_TERMS]],
     },
-    /// The render plan interpolates the multiple-bounce term from anchors: the part every
-    /// stream shares (exact single bounce, affine in a Schlick F0) as its two monomial
-    /// coefficients per pixel, the multiple-bounce term as monomial coefficients per anchor
-    /// (the interpolation is linear, so it carries them to the pixels,
-    /// [`interpolate`]) and, at the pixels without anchors, per pixel.
+    /// The render plan interpolates the multiple-bounce term from anchors (or evaluates it at
+    /// every sub-sample, `tabulated` without anchors): the part every stream shares (exact
+    /// single bounce, affine in a Schlick F0) as its two coefficients per pixel, the
+    /// multiple-bounce term as coefficients per anchor (the interpolation is linear, so it
+    /// carries them to the pixels, [`interpolate`]) and, at the pixels without anchors, the
+    /// whole prediction's coefficients per pixel (their `shared` is zero). The moments are
+    /// taken over the anchors' cells ([`AnchorCells`]).
     Anchored {
         shared: Vec<[[f64; 2]; 3]>,
-        anchors: &'o Anchors,
+        anchors: Option<&'o Anchors>,
         lambert: &'o [[f64; 3]],
         /// `[stream][anchor]`, coefficient `j` of channel `c` at `3 j + c`.
         multi: Vec<Vec<[f64; 3 * MAX_TERMS]>>,
         /// `[stream]`: the pixels without anchors in increasing order, with their
         /// coefficients laid out as `multi`.
         exact: Vec<Vec<(usize, [f64; 3 * MAX_TERMS])>>,
-        /// Number of F0 nodes (the polynomial's degree plus one).
-        nodes: usize,
+        basis: AnchoredBasis,
     },
     /// `kulla-conty`: the single bounce's two coefficients per pixel, and the compensation
     /// lobe as an image `W` that does not depend on F0 times a colour `s(F0)` that depends
@@ -80,12 +83,19 @@ enum NodeRenders<'o> {
         /// solve's roughness.
         colour: Box<dyn Fn(f64) -> [f64; 3] + Sync + 'o>,
     },
-    /// `tabulated` with a Schlick F0 ([`Objective::order_parts`]): the single bounce's two
-    /// coefficients per pixel, and the multiple-bounce lobe of each order group as a quadratic
-    /// in F0 times an inner factor that does not depend on the pixel: 1, `F_mid,3 = m + (1 -
-    /// m) F0` (affine, so it folds into the powers up to `F0^3`) and the tail factor `h(F0)` of
-    /// the orders >= 4. Exact in the basis `1, F0, F0^2, F0^3, h, F0 h, F0^2 h`.
-    Ordered(OrderParts<'o>),
+}
+
+/// The basis of F0 of [`NodeRenders::Anchored`].
+enum AnchoredBasis {
+    /// Monomials `1, F0, ..., F0^(n - 1)` through `n` F0 nodes (the polynomial's degree plus
+    /// one).
+    Monomials(usize),
+    /// `tabulated` with a Schlick F0 ([`Objective::order_parts`]): the multiple-bounce lobe of
+    /// each order group is a quadratic in F0 times an inner factor that does not depend on the
+    /// pixel: 1, `F_mid,3 = m + (1 - m) F0` (affine, so it folds into the powers up to `F0^3`)
+    /// and the tail factor `h(F0)` of the orders >= 4. Exact in the basis `1, F0, F0^2, F0^3,
+    /// h, F0 h, F0^2 h`.
+    Orders(SchlickOrders),
 }
 
 impl NodeRenders<'_> {
@@ -94,7 +104,7 @@ impl NodeRenders<'_> {
         match self {
             NodeRenders::Whole { renders, .. } => renders[0].len(),
             NodeRenders::Anchored { multi, .. } => multi.len(),
-            NodeRenders::Compensated { .. } | NodeRenders::Ordered(_) => 1,
+            NodeRenders::Compensated { .. } => 1,
         }
     }
 
@@ -102,22 +112,31 @@ impl NodeRenders<'_> {
     fn terms(&self) -> usize {
         match self {
             NodeRenders::Whole { lagrange, .. } => lagrange.len(),
-            NodeRenders::Anchored { nodes, .. } => *nodes,
+            NodeRenders::Anchored {
+                basis: AnchoredBasis::Monomials(n),
+                ..
+            } => *n,
+            NodeRenders::Anchored {
+                basis: AnchoredBasis::Orders(_),
+                ..
+            } => 7,
             NodeRenders::Compensated { .. } => 3,
-            NodeRenders::Ordered(_) => 7,
         }
     }
 
     /// The basis functions of F0 at `f` for `channel`: monomials `1, f, ..., f^(terms - 1)`,
-    /// or `1, f, s(f)` for [`NodeRenders::Compensated`].
+    /// `1, f, s(f)` for [`NodeRenders::Compensated`], or those of [`AnchoredBasis::Orders`].
     fn basis(&self, channel: usize, f: f64) -> [f64; MAX_TERMS] {
         let mut phi = [0.0; MAX_TERMS];
         match self {
             NodeRenders::Compensated { colour, .. } => {
                 phi[..3].copy_from_slice(&[1.0, f, colour(f)[channel]]);
             }
-            NodeRenders::Ordered(parts) => {
-                let h = parts.orders.tail_factor(f);
+            NodeRenders::Anchored {
+                basis: AnchoredBasis::Orders(orders),
+                ..
+            } => {
+                let h = orders.tail_factor(f);
                 phi.copy_from_slice(&[1.0, f, f * f, f * f * f, h, f * h, f * f * h]);
             }
             _ => {
@@ -147,7 +166,7 @@ impl NodeRenders<'_> {
                 exact,
                 ..
             } => {
-                let own = match &anchors.corners[p] {
+                let own = match anchors.and_then(|anchors| anchors.corners[p].as_ref()) {
                     Some(corners) => interpolate(corners, &multi[stream], &lambert[p]),
                     None => {
                         let exact = &exact[stream];
@@ -171,35 +190,6 @@ impl NodeRenders<'_> {
                     a[..3].copy_from_slice(&[intercept, slope, image[p][c]]);
                 }
             }
-            NodeRenders::Ordered(parts) => {
-                let raw = match parts
-                    .anchors
-                    .and_then(|anchors| anchors.corners[p].as_ref())
-                {
-                    Some(corners) => interpolate(corners, &parts.multi, &parts.lambert[p]),
-                    None => {
-                        let i = parts
-                            .exact
-                            .binary_search_by_key(&p, |&(k, _)| k)
-                            .expect("a pixel without anchors is evaluated exactly");
-                        parts.exact[i].1
-                    }
-                };
-                let m = parts.orders.middle_moment();
-                for (c, a) in a.iter_mut().enumerate() {
-                    let q = |g: usize, k: usize| raw[3 * (3 * g + k) + c];
-                    let [intercept, slope] = parts.single[p][c];
-                    a.copy_from_slice(&[
-                        intercept + q(0, 0) + m * q(1, 0),
-                        slope + q(0, 1) + (1.0 - m) * q(1, 0) + m * q(1, 1),
-                        q(0, 2) + (1.0 - m) * q(1, 1) + m * q(1, 2),
-                        (1.0 - m) * q(1, 2),
-                        q(2, 0),
-                        q(2, 1),
-                        q(2, 2),
-                    ]);
-                }
-            }
         }
         a
     }
@@ -221,6 +211,131 @@ pub struct Projection<'o, 'r> {
     pub roughness_dim: usize,
     /// Renders made so far (one per F0 node and solve).
     renders: AtomicUsize,
+    /// The anchors' cells of the moment sums, once an anchored solve has asked for them.
+    cells: std::sync::OnceLock<AnchorCells>,
+}
+
+/// Cells of anchors per parallel task of the moment sums.
+const CELL_CHUNK: usize = 32;
+
+/// One channel's moment sums in fixed-size arrays (the first `k` entries used; `aa` in its
+/// upper triangle), added up before they become [`Moments`].
+#[derive(Default)]
+struct Sums {
+    aa: [[f64; MAX_TERMS]; MAX_TERMS],
+    at: [f64; MAX_TERMS],
+    ad: [f64; MAX_TERMS],
+    tt: f64,
+    dd: f64,
+    dt: f64,
+}
+
+impl Sums {
+    /// The sums of two disjoint pixel sets together.
+    fn add(&mut self, other: Sums) {
+        for (row, other) in self.aa.iter_mut().zip(&other.aa) {
+            row.iter_mut().zip(other).for_each(|(a, b)| *a += b);
+        }
+        self.at.iter_mut().zip(&other.at).for_each(|(a, b)| *a += b);
+        self.ad.iter_mut().zip(&other.ad).for_each(|(a, b)| *a += b);
+        self.tt += other.tt;
+        self.dd += other.dd;
+        self.dt += other.dt;
+    }
+
+    /// The moments of the first `k` basis functions, `aa` mirrored from its upper triangle.
+    fn moments(self, k: usize) -> Moments {
+        Moments {
+            aa: (0..k)
+                .map(|j| (0..k).map(|l| self.aa[j.min(l)][j.max(l)]).collect())
+                .collect(),
+            at: self.at[..k].to_vec(),
+            ad: self.ad[..k].to_vec(),
+            tt: self.tt,
+            dd: self.dd,
+            dt: self.dt,
+        }
+    }
+}
+
+/// The loss pixels with anchors grouped by the four anchors they interpolate (a cell of an
+/// anchor grid), with each cell's `M_ii' = sum v L^2 w_i w_i'` per channel over its pixels
+/// (`v` the loss weight, `L = pi lambert`, `w` the bilinear weights): what
+/// [`Projection::cell_sums`] needs that no solve changes. The plan's anchors are fixed for
+/// an objective, so one is built per projection, at its first anchored solve.
+struct AnchorCells {
+    cells: Vec<Cell>,
+    /// The loss pixels of every cell, cell after cell, each cell's in increasing order.
+    pixels: Vec<u32>,
+    /// The loss pixels without anchors, in increasing order.
+    exact: Vec<usize>,
+}
+
+/// One cell of [`AnchorCells`].
+struct Cell {
+    /// Its anchors, in the order its pixels' corners list them.
+    anchors: [u32; 4],
+    /// Its pixels' range in [`AnchorCells::pixels`].
+    pixels: std::ops::Range<usize>,
+    /// `M` per channel.
+    gram: [[[f64; 4]; 4]; 3],
+}
+
+impl AnchorCells {
+    fn new(anchors: &Anchors, lambert: &[[f64; 3]], weights: &[[f64; 3]]) -> AnchorCells {
+        let mut index: std::collections::HashMap<[u32; 4], usize> = Default::default();
+        let mut members: Vec<Vec<u32>> = Vec::new();
+        let mut exact = Vec::new();
+        for (p, corners) in anchors.corners.iter().enumerate() {
+            let Some(corners) = corners else {
+                exact.push(p);
+                continue;
+            };
+            let key = corners.map(|(a, _)| a);
+            let cell = *index.entry(key).or_insert_with(|| {
+                members.push(Vec::new());
+                members.len() - 1
+            });
+            members[cell].push(p as u32);
+        }
+        let mut keys = vec![[0; 4]; members.len()];
+        for (key, &cell) in &index {
+            keys[cell] = *key;
+        }
+        let mut pixels = Vec::with_capacity(anchors.corners.len() - exact.len());
+        let cells = members
+            .iter()
+            .zip(keys)
+            .map(|(members, key)| {
+                let start = pixels.len();
+                pixels.extend_from_slice(members);
+                let mut gram = [[[0.0; 4]; 4]; 3];
+                for &p in members {
+                    let p = p as usize;
+                    let corners = anchors.corners[p].expect("grouped with anchors");
+                    for (c, gram) in gram.iter_mut().enumerate() {
+                        let l = PI * lambert[p][c];
+                        let vl2 = weights[p][c] * l * l;
+                        for (i, &(_, wi)) in corners.iter().enumerate() {
+                            for (i2, &(_, wi2)) in corners.iter().enumerate() {
+                                gram[i][i2] += vl2 * wi * wi2;
+                            }
+                        }
+                    }
+                }
+                Cell {
+                    anchors: key,
+                    pixels: start..pixels.len(),
+                    gram,
+                }
+            })
+            .collect();
+        AnchorCells {
+            cells,
+            pixels,
+            exact,
+        }
+    }
 }
 
 /// Moment sums of one channel, from which the squared error at any (F0, rho) follows.
@@ -236,19 +351,6 @@ struct Moments {
 }
 
 impl Moments {
-    /// The moments of two disjoint pixel sets together.
-    fn add(mut self, other: Moments) -> Moments {
-        for (row, other) in self.aa.iter_mut().zip(&other.aa) {
-            row.iter_mut().zip(other).for_each(|(a, b)| *a += b);
-        }
-        self.at.iter_mut().zip(&other.at).for_each(|(a, b)| *a += b);
-        self.ad.iter_mut().zip(&other.ad).for_each(|(a, b)| *a += b);
-        self.tt += other.tt;
-        self.dd += other.dd;
-        self.dt += other.dt;
-        self
-    }
-
     /// `(squared error, rho)` at F0 = `f`, with rho optimal in [0, 1]; `basis` gives the
     /// basis functions at `f` ([`NodeRenders::basis`]).
     fn error(&self, f: f64, basis: &impl Fn(f64) -> [f64; MAX_TERMS]) -> (f64, f64) {
@@ -303,6 +405,52 @@ impl Moments {
             .expect("two candidates");
         let (e, rho) = self.error(f, &basis);
         (f, rho, e)
+    }
+}
+
+/// [`NodeRenders::Anchored`] of `tabulated`'s order parts: each anchor's and each exact
+/// pixel's nine parts per channel turned into coefficients of [`AnchoredBasis::Orders`] (the
+/// exact pixels' with their single bounce, as the other bases lay them out).
+fn ordered(parts: OrderParts<'_>) -> NodeRenders<'_> {
+    let m = parts.orders.middle_moment();
+    // Part `k` of group `g` of channel `c` is at `3 (3 g + k) + c`.
+    let to_basis = |raw: &[f64; 3 * ORDER_PARTS]| -> [f64; 3 * MAX_TERMS] {
+        let mut out = [0.0; 3 * MAX_TERMS];
+        for c in 0..3 {
+            let q = |g: usize, k: usize| raw[3 * (3 * g + k) + c];
+            let a = [
+                q(0, 0) + m * q(1, 0),
+                q(0, 1) + (1.0 - m) * q(1, 0) + m * q(1, 1),
+                q(0, 2) + (1.0 - m) * q(1, 1) + m * q(1, 2),
+                (1.0 - m) * q(1, 2),
+                q(2, 0),
+                q(2, 1),
+                q(2, 2),
+            ];
+            for (j, a) in a.into_iter().enumerate() {
+                out[3 * j + c] = a;
+            }
+        }
+        out
+    };
+    let mut shared = parts.single;
+    let mut exact = Vec::with_capacity(parts.exact.len());
+    for (k, raw) in &parts.exact {
+        let mut a = to_basis(raw);
+        for (c, [intercept, slope]) in shared[*k].into_iter().enumerate() {
+            a[c] += intercept;
+            a[3 + c] += slope;
+        }
+        shared[*k] = [[0.0; 2]; 3];
+        exact.push((*k, a));
+    }
+    NodeRenders::Anchored {
+        shared,
+        anchors: parts.anchors,
+        lambert: parts.lambert,
+        multi: vec![parts.multi.iter().map(to_basis).collect()],
+        exact: vec![exact],
+        basis: AnchoredBasis::Orders(parts.orders),
     }
 }
 
@@ -390,13 +538,14 @@ impl<'o, 'r> Projection<'o, 'r> {
             diffuse,
             roughness_dim: if space.anisotropic { 2 } else { 1 },
             renders: AtomicUsize::new(0),
+            cells: std::sync::OnceLock::new(),
         })
     }
 
     /// Whether the projected loss is exact rather than a polynomial approximation (see the
     /// module table): a prediction polynomial in F0 of degree at most 2, `kulla-conty`'s
     /// `A + B F0 + W s(F0)` ([`NodeRenders::Compensated`]) or `tabulated`'s order groups
-    /// ([`NodeRenders::Ordered`]; not with a fitted exposure, whose renders go through the
+    /// ([`AnchoredBasis::Orders`]; not with a fitted exposure, whose renders go through the
     /// polynomial). Where the plan drops the lobe as faint the prediction is the single
     /// bounce's, affine in F0, which the polynomial reproduces.
     pub fn is_exact(&self) -> bool {
@@ -441,7 +590,7 @@ impl<'o, 'r> Projection<'o, 'r> {
             return compensated;
         }
         if let Some(parts) = self.objective.order_parts(&at(self.nodes[0])) {
-            return NodeRenders::Ordered(parts);
+            return ordered(parts);
         }
         let Some(mut nodes) = self
             .nodes
@@ -479,11 +628,11 @@ impl<'o, 'r> Projection<'o, 'r> {
             .collect();
         NodeRenders::Anchored {
             shared,
-            anchors,
+            anchors: Some(anchors),
             lambert,
             multi,
             exact,
-            nodes: self.nodes.len(),
+            basis: AnchoredBasis::Monomials(self.nodes.len()),
         }
     }
 
@@ -525,27 +674,18 @@ impl<'o, 'r> Projection<'o, 'r> {
         })
     }
 
-    /// The moments of the three channels over the loss pixels `pixels` (see [`Moments`]), in
-    /// one pass over the renders. Per channel the sums run over the pixels in order, and
-    /// `aa`'s products are symmetric in `(j, l)` bit for bit, so its lower triangle is the
-    /// upper one's mirror. A single stream (deterministic models) is its own pair: its
-    /// coefficients are computed once, and `(a1 a2 + a2 a1) / 2` is `a1 a1` exactly.
-    fn moments(
+    /// The sums of the three channels over the loss pixels `pixels` (see [`Moments`]), one
+    /// pixel at a time from its coefficients ([`NodeRenders::coefficients`]). Per channel the
+    /// sums run over the pixels in order, and `aa`'s products are symmetric in `(j, l)` bit for
+    /// bit, so its upper triangle stands for it. A single stream (deterministic models) is its
+    /// own pair: its coefficients are computed once, and `(a1 a2 + a2 a1) / 2` is `a1 a1`
+    /// exactly.
+    fn pixel_sums(
         &self,
-        pixels: std::ops::Range<usize>,
+        pixels: impl Iterator<Item = usize>,
         renders: &NodeRenders,
         target: &[[f64; 3]],
-    ) -> [Moments; 3] {
-        /// One channel's sums in fixed-size arrays (the first `k` entries used).
-        #[derive(Default)]
-        struct Sums {
-            aa: [[f64; MAX_TERMS]; MAX_TERMS],
-            at: [f64; MAX_TERMS],
-            ad: [f64; MAX_TERMS],
-            tt: f64,
-            dd: f64,
-            dt: f64,
-        }
+    ) -> [Sums; 3] {
         let k = renders.terms();
         let streams = renders.streams();
         let mut sums: [Sums; 3] = Default::default();
@@ -587,16 +727,114 @@ impl<'o, 'r> Projection<'o, 'r> {
                 m.dt += v * d * t;
             }
         }
-        sums.map(|m| Moments {
-            aa: (0..k)
-                .map(|j| (0..k).map(|l| m.aa[j.min(l)][j.max(l)]).collect())
-                .collect(),
-            at: m.at[..k].to_vec(),
-            ad: m.ad[..k].to_vec(),
-            tt: m.tt,
-            dd: m.dd,
-            dt: m.dt,
-        })
+        sums
+    }
+
+    /// The sums of the three channels over the pixels of `cells`, in anchor space. A pixel
+    /// with anchors predicts `a = s + L u` in each channel: `s` its shared part (`A`, `B` on
+    /// the first two basis functions), `L = pi lambert` and `u = sum_i w_i Q_i` its anchors'
+    /// coefficients `Q_i` under its bilinear weights `w_i`. So over a cell
+    /// `sum v a a^T = sum v s s^T + sum_i (h_i Q_i^T + Q_i h_i^T) + sum_ii' M_ii' Q_i Q_i'^T`,
+    /// with `h_i = sum v L w_i s` and `M_ii' = sum v L^2 w_i w_i'` ([`AnchorCells`], fixed for
+    /// the fit), and `sum v a t = sum v s t + sum_i (sum v L w_i t) Q_i`. The pixel loop then
+    /// touches the shared part only, and the coefficients enter once per cell, not once per
+    /// pixel. Two streams enter as the pixel sums take them: `(a1 a2^T + a2 a1^T) / 2` and
+    /// `(a1 + a2) / 2`.
+    fn cell_sums(
+        &self,
+        cells: &[Cell],
+        grouped: &[u32],
+        renders: &NodeRenders,
+        target: &[[f64; 3]],
+    ) -> [Sums; 3] {
+        let NodeRenders::Anchored {
+            shared,
+            anchors: Some(anchors),
+            lambert,
+            multi,
+            ..
+        } = renders
+        else {
+            unreachable!("cells are taken over anchored renders");
+        };
+        let k = renders.terms();
+        let (first, last) = (&multi[0], &multi[multi.len() - 1]);
+        let mut sums: [Sums; 3] = Default::default();
+        for cell in cells {
+            for (c, m) in sums.iter_mut().enumerate() {
+                // Per corner: `h` for the intercept and the slope, `sum v L w t`, `sum v L w d`.
+                let (mut h, mut r, mut e) = ([[0.0; 2]; 4], [0.0; 4], [0.0; 4]);
+                for &p in &grouped[cell.pixels.clone()] {
+                    let p = p as usize;
+                    let v = self.weights[p][c];
+                    if v == 0.0 {
+                        continue;
+                    }
+                    let (t, d) = (target[p][c], self.diffuse.as_ref().map_or(0.0, |d| d[p][c]));
+                    let [a, b] = shared[p][c];
+                    m.aa[0][0] += v * a * a;
+                    m.aa[0][1] += v * a * b;
+                    m.aa[1][1] += v * b * b;
+                    m.at[0] += v * a * t;
+                    m.at[1] += v * b * t;
+                    m.ad[0] += v * a * d;
+                    m.ad[1] += v * b * d;
+                    m.tt += v * t * t;
+                    m.dd += v * d * d;
+                    m.dt += v * d * t;
+                    let corners = anchors.corners[p]
+                        .as_ref()
+                        .expect("a cell's pixel has anchors");
+                    let vl = v * PI * lambert[p][c];
+                    for (i, &(_, w)) in corners.iter().enumerate() {
+                        let x = vl * w;
+                        h[i][0] += x * a;
+                        h[i][1] += x * b;
+                        r[i] += x * t;
+                        e[i] += x * d;
+                    }
+                }
+                let q = |stream: &[[f64; 3 * MAX_TERMS]], i: usize| -> [f64; MAX_TERMS] {
+                    let anchor = &stream[cell.anchors[i] as usize];
+                    std::array::from_fn(|j| anchor[3 * j + c])
+                };
+                let q1: [[f64; MAX_TERMS]; 4] = std::array::from_fn(|i| q(first, i));
+                let q2: [[f64; MAX_TERMS]; 4] = std::array::from_fn(|i| q(last, i));
+                let gram = &cell.gram[c];
+                for i in 0..4 {
+                    let mean: [f64; MAX_TERMS] =
+                        std::array::from_fn(|j| 0.5 * (q1[i][j] + q2[i][j]));
+                    for j in 0..k {
+                        m.at[j] += r[i] * mean[j];
+                        m.ad[j] += e[i] * mean[j];
+                        // The cross terms `h Q^T + Q h^T`, upper triangle.
+                        for (row, hs) in h[i].iter().enumerate() {
+                            if j >= row {
+                                m.aa[row][j] += hs * mean[j];
+                            }
+                            if j <= row {
+                                m.aa[j][row] += hs * mean[j];
+                            }
+                        }
+                    }
+                }
+                // `sum_ii' M_ii' (Q1_i Q2_i'^T + Q2_i Q1_i'^T) / 2`, through `P = M Q`.
+                let times_gram = |q: &[[f64; MAX_TERMS]; 4]| -> [[f64; MAX_TERMS]; 4] {
+                    std::array::from_fn(|i| {
+                        std::array::from_fn(|l| (0..4).map(|i2| gram[i][i2] * q[i2][l]).sum())
+                    })
+                };
+                let (p1, p2) = (times_gram(&q1), times_gram(&q2));
+                for i in 0..4 {
+                    for j in 0..k {
+                        for l in j..k {
+                            m.aa[j][l] += 0.5 * (q1[i][j] * p2[i][l] + q2[i][j] * p1[i][l]);
+                        }
+                    }
+                }
+            }
+        }
+        sums
     }
 
     /// The loss minimised over F0 and diffuse at roughness coordinates `roughness`, and the
@@ -605,24 +843,48 @@ impl<'o, 'r> Projection<'o, 'r> {
         self.renders.fetch_add(self.nodes.len(), Ordering::Relaxed);
         let renders = self.node_renders(roughness);
         let target = self.objective.targets();
-        // Pixel chunks in parallel, their moments added in chunk order: the same sums for any
-        // thread count.
-        let moments = (0..self.weights.len())
-            .step_by(MOMENT_CHUNK)
-            .collect::<Vec<_>>()
-            .par_iter()
-            .map(|&start| {
-                let end = (start + MOMENT_CHUNK).min(self.weights.len());
-                self.moments(start..end, &renders, target)
-            })
-            .collect::<Vec<_>>()
+        // Chunks of cells and of pixels in parallel, their sums added in chunk order: the same
+        // sums for any thread count.
+        let sums = match &renders {
+            NodeRenders::Anchored {
+                anchors: Some(anchors),
+                lambert,
+                ..
+            } => {
+                let cells = self
+                    .cells
+                    .get_or_init(|| AnchorCells::new(anchors, lambert, &self.weights));
+                let by_cells = cells
+                    .cells
+                    .par_chunks(CELL_CHUNK)
+                    .map(|chunk| self.cell_sums(chunk, &cells.pixels, &renders, target));
+                let exact = cells
+                    .exact
+                    .par_chunks(MOMENT_CHUNK)
+                    .map(|chunk| self.pixel_sums(chunk.iter().copied(), &renders, target));
+                by_cells.chain(exact).collect::<Vec<_>>()
+            }
+            _ => (0..self.weights.len())
+                .step_by(MOMENT_CHUNK)
+                .collect::<Vec<_>>()
+                .par_iter()
+                .map(|&start| {
+                    let end = (start + MOMENT_CHUNK).min(self.weights.len());
+                    self.pixel_sums(start..end, &renders, target)
+                })
+                .collect(),
+        };
+        let k = renders.terms();
+        let moments = sums
             .into_iter()
-            .reduce(|a, b| {
-                let [a0, a1, a2] = a;
-                let [b0, b1, b2] = b;
-                [a0.add(b0), a1.add(b1), a2.add(b2)]
+            .reduce(|mut a, b| {
+                for (a, b) in a.iter_mut().zip(b) {
+                    a.add(b);
+                }
+                a
             })
-            .expect("at least one pixel");
+            .expect("at least one chunk")
+            .map(|sums| sums.moments(k));
         let (mut f0, mut rho, mut loss) = ([0.0; 3], [0.0; 3], 0.0);
         for (c, m) in moments.iter().enumerate() {
             let (f, r, e) = m.minimise(|f| renders.basis(c, f));
@@ -675,7 +937,13 @@ mod tests {
             let roughness = [alpha.ln()];
             let split = projection.node_renders(&roughness);
             match model {
-                Model::Tabulated => assert!(matches!(split, NodeRenders::Ordered(_))),
+                Model::Tabulated => assert!(matches!(
+                    split,
+                    NodeRenders::Anchored {
+                        basis: AnchoredBasis::Orders(_),
+                        ..
+                    }
+                )),
                 _ => assert!(matches!(split, NodeRenders::Compensated { .. })),
             }
             let mut f0s = projection.nodes.clone();
@@ -705,6 +973,68 @@ mod tests {
                             whole[c]
                         );
                     }
+                }
+            }
+        }
+    }
+
+    /// The moment sums over the anchors' cells equal those taken pixel by pixel, to rounding:
+    /// `tabulated` (one stream, its order basis) and `bitterli` (two streams, monomials),
+    /// with a diffuse layer. A wrong cross term, a Gram entry off its corner or a stream mixed
+    /// up moves them by far more than 1e-10.
+    #[test]
+    fn cell_sums_equal_the_pixel_sums() {
+        for model in [Model::Tabulated, Model::Bitterli] {
+            let space = ParamSpace {
+                diffuse: true,
+                ..ParamSpace::plain(model)
+            };
+            let truth = space.material(&[0.6f64.ln(), 1.8, 0.3, 0.0, -3.0, -2.0, -1.0]);
+            let records = pinhole_records(&truth);
+            let objective =
+                Objective::new(space, &records, LossKind::L2, 3).with_precision(Precision::F64);
+            let projection = Projection::new(&objective).expect("Schlick and L2 project");
+            let renders = projection.node_renders(&[0.4f64.ln()]);
+            let NodeRenders::Anchored {
+                anchors: Some(anchors),
+                lambert,
+                multi,
+                ..
+            } = &renders
+            else {
+                panic!("{model}: anchored renders");
+            };
+            assert_eq!(multi.len(), if model == Model::Bitterli { 2 } else { 1 });
+            let target = objective.targets();
+            let cells = AnchorCells::new(anchors, lambert, &projection.weights);
+            assert!(cells.cells.len() > 10);
+            let mut by_cells = projection.cell_sums(&cells.cells, &cells.pixels, &renders, target);
+            let exact = projection.pixel_sums(cells.exact.iter().copied(), &renders, target);
+            for (a, b) in by_cells.iter_mut().zip(exact) {
+                a.add(b);
+            }
+            let by_pixels = projection.pixel_sums(0..projection.weights.len(), &renders, target);
+            let k = renders.terms();
+            for (c, (a, b)) in by_cells.into_iter().zip(by_pixels).enumerate() {
+                let (a, b) = (a.moments(k), b.moments(k));
+                let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= 1e-10 * scale;
+                let scale = b.aa.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+                for j in 0..k {
+                    for l in 0..k {
+                        assert!(
+                            close(a.aa[j][l], b.aa[j][l], scale),
+                            "{model} c{c} aa[{j}][{l}]: {} vs {}",
+                            a.aa[j][l],
+                            b.aa[j][l]
+                        );
+                    }
+                    let scale_t = b.at.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    assert!(close(a.at[j], b.at[j], scale_t), "{model} c{c} at[{j}]");
+                    let scale_d = b.ad.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    assert!(close(a.ad[j], b.ad[j], scale_d), "{model} c{c} ad[{j}]");
+                }
+                for (x, y) in [(a.tt, b.tt), (a.dd, b.dd), (a.dt, b.dt)] {
+                    assert!(close(x, y, y.abs()), "{model} c{c}: {x} vs {y}");
                 }
             }
         }
