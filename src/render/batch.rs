@@ -41,6 +41,7 @@ use crate::shading::ShadingRecords;
 use num_dual::Dual64;
 use rayon::prelude::*;
 use std::f64::consts::FRAC_1_PI;
+use std::mem::MaybeUninit;
 
 /// Pixels per rayon task (as [`super::TASK_PIXELS`]).
 const TASK_PIXELS: usize = super::TASK_PIXELS;
@@ -255,12 +256,33 @@ enum Stored {
 /// strictly above the surface); the diffuse term needs only each pixel's irradiance sum.
 #[derive(Clone, Debug)]
 pub struct BatchRecords {
-    /// Records of pixel `k` (position in the pixel list) are `start[k]..start[k + 1]`.
-    start: Vec<usize>,
+    /// The slots of each task of [`TASK_PIXELS`] pixels (the last may have fewer).
+    blocks: Vec<Block>,
+    /// Number of records (slots holding a sub-sample, not padding).
+    records: usize,
     stored: Stored,
     /// Per pixel: sum over all its sub-samples of irradiance / (pi spp): the radiance of a
     /// white Lambertian layer.
     lambert: Vec<[f64; 3]>,
+}
+
+/// The slots of one task's pixels, record-major: record `k` of the task's pixel `i` (of
+/// `pixels`) sits at `first + k * pixels + i`, for `k` below `depth`, the most records any of
+/// its pixels has. A pixel with fewer records fills its remaining slots with [`padding`], of
+/// weight zero. A pixel's sum is then the sum of `depth` rows, one SIMD add per row for all
+/// the task's pixels, in the same order as the pixel's records: the sums are those of adding
+/// each pixel's records in index order, to the bit.
+#[derive(Clone, Copy, Debug)]
+struct Block {
+    first: usize,
+    pixels: usize,
+    depth: usize,
+}
+
+impl Block {
+    fn slots(&self) -> std::ops::Range<usize> {
+        self.first..self.first + self.depth * self.pixels
+    }
 }
 
 /// Values per record of one evaluation, and what the pixel sums need.
@@ -288,6 +310,10 @@ pub struct Lanes<F> {
     added: Vec<F>,
     added_ax: Vec<F>,
     added_ay: Vec<F>,
+    /// Per pixel of the task and channel, in `f64`, the sums of the rows ([`Block`]) of
+    /// `fresnel` (the value) and, with tangents, of `by_ax`, `by_ay`, `d_fresnel_a`,
+    /// `d_fresnel_b`, in that order.
+    sums: [[Vec<f64>; 3]; 5],
 }
 
 /// What the batch kernel evaluates: the single-bounce lobe and a model's multiple-bounce term
@@ -383,7 +409,7 @@ pub struct PixelTangents {
     pub diffuse: Vec<[f64; 3]>,
 }
 
-/// [`fill_lanes_any`] compiled for the instruction sets `features` as the function `name`
+/// [`evaluate_any`] compiled for the instruction sets `features` as the function `name`
 /// (x86-64 only; the caller checks the CPU has them).
 macro_rules! compiled_for {
     ($name:ident, $features:literal) => {
@@ -392,11 +418,11 @@ macro_rules! compiled_for {
         fn $name<F: LaneFloat>(
             geometry: &Geometry<F>,
             lobe: &Lobe,
-            range: std::ops::Range<usize>,
-            tangents: bool,
+            block: Block,
+            pixels: Pixels,
             lanes: &mut Lanes<F>,
         ) {
-            fill_lanes_any(geometry, lobe, range, tangents, lanes)
+            evaluate_any(geometry, lobe, block, pixels, lanes)
         }
     };
 }
@@ -428,20 +454,12 @@ impl BatchRecords {
         let indirect = model == Model::FastMsx;
         match precision {
             Precision::F32 => {
-                let (start, lambert, geometry) = gather::<f32>(records, pixels, indirect);
-                BatchRecords {
-                    start,
-                    lambert,
-                    stored: Stored::F32(geometry),
-                }
+                let (gathered, geometry) = gather::<f32>(records, pixels, indirect);
+                gathered.with(Stored::F32(geometry))
             }
             Precision::F64 => {
-                let (start, lambert, geometry) = gather::<f64>(records, pixels, indirect);
-                BatchRecords {
-                    start,
-                    lambert,
-                    stored: Stored::F64(geometry),
-                }
+                let (gathered, geometry) = gather::<f64>(records, pixels, indirect);
+                gathered.with(Stored::F64(geometry))
             }
         }
     }
@@ -467,7 +485,7 @@ impl BatchRecords {
 
     /// Number of records the kernel evaluates per render.
     pub fn record_count(&self) -> usize {
-        self.start.last().copied().unwrap_or(0)
+        self.records
     }
 
     /// Predicted radiance of every pixel for the single-bounce model `single` plus a
@@ -517,28 +535,41 @@ impl BatchRecords {
         tangents: bool,
     ) -> (Vec<[f64; 3]>, Option<PixelTangents>) {
         let n = self.pixel_count();
-        let mut values = vec![[0.0; 3]; n];
-        let mut t = tangents.then(|| PixelTangents {
-            ax: vec![[0.0; 3]; n],
-            ay: vec![[0.0; 3]; n],
-            fresnel_a: vec![[0.0; 3]; n],
-            fresnel_b: vec![[0.0; 3]; n],
-            diffuse: self.lambert.clone(),
-        });
-        let chunks = values.par_chunks_mut(TASK_PIXELS).enumerate();
+        // Filled by the tasks, every element once (see `write_pixels`), not zeroed first: at
+        // one record per pixel, zeroing the output was a tenth of a render.
+        let mut values = Vec::with_capacity(n);
+        let mut t = tangents.then(|| [(); 4].map(|_| Vec::with_capacity(n)));
+        let chunks = values.spare_capacity_mut()[..n]
+            .par_chunks_mut(TASK_PIXELS)
+            .enumerate();
         match &mut t {
             None => chunks.for_each(|(task, out)| {
                 self.task(lobe, diffuse, task, out, None);
             }),
-            Some(t) => chunks
-                .zip(t.ax.par_chunks_mut(TASK_PIXELS))
-                .zip(t.ay.par_chunks_mut(TASK_PIXELS))
-                .zip(t.fresnel_a.par_chunks_mut(TASK_PIXELS))
-                .zip(t.fresnel_b.par_chunks_mut(TASK_PIXELS))
+            Some([ax, ay, fa, fb]) => chunks
+                .zip(ax.spare_capacity_mut()[..n].par_chunks_mut(TASK_PIXELS))
+                .zip(ay.spare_capacity_mut()[..n].par_chunks_mut(TASK_PIXELS))
+                .zip(fa.spare_capacity_mut()[..n].par_chunks_mut(TASK_PIXELS))
+                .zip(fb.spare_capacity_mut()[..n].par_chunks_mut(TASK_PIXELS))
                 .for_each(|(((((task, out), ax), ay), fa), fb)| {
                     self.task(lobe, diffuse, task, out, Some([ax, ay, fa, fb]));
                 }),
         }
+        // SAFETY: the tasks' chunks cover the first `n` elements, and `write_pixels` wrote
+        // every element of its chunk (it checks that its sums are as long as the chunk).
+        unsafe { values.set_len(n) };
+        let t = t.map(|mut lanes| {
+            // SAFETY: as for `values`.
+            lanes.iter_mut().for_each(|lane| unsafe { lane.set_len(n) });
+            let [ax, ay, fresnel_a, fresnel_b] = lanes;
+            PixelTangents {
+                ax,
+                ay,
+                fresnel_a,
+                fresnel_b,
+                diffuse: self.lambert.clone(),
+            }
+        });
         (values, t)
     }
 
@@ -549,8 +580,8 @@ impl BatchRecords {
         lobe: &Lobe,
         diffuse: [f64; 3],
         task: usize,
-        out: &mut [[f64; 3]],
-        tangents: Option<[&mut [[f64; 3]]; 4]>,
+        out: &mut [MaybeUninit<[f64; 3]>],
+        tangents: Option<[&mut [MaybeUninit<[f64; 3]>]; 4]>,
     ) {
         match &self.stored {
             Stored::F32(geometry) => self.task_in(geometry, lobe, diffuse, task, out, tangents),
@@ -564,161 +595,161 @@ impl BatchRecords {
         lobe: &Lobe,
         diffuse: [f64; 3],
         task: usize,
-        out: &mut [[f64; 3]],
-        tangents: Option<[&mut [[f64; 3]]; 4]>,
+        out: &mut [MaybeUninit<[f64; 3]>],
+        tangents: Option<[&mut [MaybeUninit<[f64; 3]>]; 4]>,
     ) {
-        let first = task * TASK_PIXELS;
-        let range = self.start[first]..self.start[first + out.len()];
+        let block = self.blocks[task];
+        let lambert = &self.lambert[task * TASK_PIXELS..][..out.len()];
         F::with_lanes(|lanes| {
-            fill_lanes(geometry, lobe, range.clone(), tangents.is_some(), lanes);
-            self.sum_pixels(lanes, diffuse, first, range, out, tangents);
+            let pixels = Pixels {
+                values: out,
+                lambert,
+                diffuse,
+                tangents,
+            };
+            evaluate(geometry, lobe, block, pixels, lanes);
         });
     }
+}
 
-    /// Each pixel of `out` (the first is pixel `first`) from the lanes of `range`, summed in
-    /// `f64`.
-    fn sum_pixels<F: LaneFloat>(
-        &self,
-        lanes: &Lanes<F>,
-        diffuse: [f64; 3],
-        first: usize,
-        range: std::ops::Range<usize>,
-        out: &mut [[f64; 3]],
-        mut tangents: Option<[&mut [[f64; 3]]; 4]>,
-    ) {
-        // After `fill_lanes`, every lane array holds the record's weighted contribution, so a
-        // pixel's value is the sum of its records' lanes, added in index order.
-        let offsets = &self.start[first..=first + out.len()];
-        let n = range.len();
-        let sum = |lanes: [&[F]; 3], records: std::ops::Range<usize>| -> [f64; 3] {
-            let mut total = [0.0; 3];
-            for r in records {
-                for c in 0..3 {
-                    total[c] += lanes[c][r].re64();
-                }
-            }
-            total
-        };
-        fn channels<F>(lane: &[Vec<F>; 3], n: usize) -> [&[F]; 3] {
-            [0, 1, 2].map(|c| &lane[c][..n])
-        }
-        let fresnel = channels(&lanes.fresnel, n);
-        for (i, value) in out.iter_mut().enumerate() {
-            let records = offsets[i] - range.start..offsets[i + 1] - range.start;
-            let specular = sum(fresnel, records);
-            let lambert = self.lambert[first + i];
-            *value = [0, 1, 2].map(|c| specular[c] + diffuse[c] * lambert[c]);
-        }
-        if let Some([ax, ay, fa, fb]) = &mut tangents {
-            let lanes = [
-                &lanes.by_ax,
-                &lanes.by_ay,
-                &lanes.d_fresnel_a,
-                &lanes.d_fresnel_b,
-            ]
-            .map(|lane| channels(lane, n));
-            for (lane, out) in lanes.into_iter().zip([ax, ay, fa, fb]) {
-                for (i, value) in out.iter_mut().enumerate() {
-                    *value = sum(lane, offsets[i] - range.start..offsets[i + 1] - range.start);
-                }
-            }
-        }
-    }
+/// Where [`evaluate`] writes a task's pixels: their values (the Lambertian layer's
+/// `diffuse * lambert` added) and, when asked, their tangents (by ax, ay, first and second
+/// Fresnel parameter).
+struct Pixels<'a> {
+    values: &'a mut [MaybeUninit<[f64; 3]>],
+    lambert: &'a [[f64; 3]],
+    diffuse: [f64; 3],
+    tangents: Option<[&'a mut [MaybeUninit<[f64; 3]>]; 4]>,
 }
 
 /// Real-valued arrays of a record: [`Geometry::record_values`].
 const REAL_LANES: usize = 19;
 
-/// `(start, lambert, geometry)` of [`BatchRecords`] for the records of `pixels`. Two parallel
-/// passes over chunks of pixels: the first counts each chunk's records, the second writes them
-/// straight into their place in the final arrays. Gathering each chunk into arrays of its own
-/// and joining them wrote every record twice, and the join ran on one thread: a fifth of a
-/// `single` fit's samples, most of it the kernel clearing fresh pages.
+/// What [`gather`] lays out besides the arrays.
+struct Gathered {
+    blocks: Vec<Block>,
+    records: usize,
+    lambert: Vec<[f64; 3]>,
+}
+
+impl Gathered {
+    fn with(self, stored: Stored) -> BatchRecords {
+        BatchRecords {
+            blocks: self.blocks,
+            records: self.records,
+            stored,
+            lambert: self.lambert,
+        }
+    }
+}
+
+/// The [`Block`]s, the Lambertian sums and the arrays of the records of `pixels`. Two parallel
+/// passes over the tasks' pixels: the first counts each task's records and finds its depth, the
+/// second writes the records (and the padding) straight into their slots in the final arrays.
 fn gather<F: LaneFloat>(
     records: &ShadingRecords,
     pixels: &[usize],
     indirect: bool,
-) -> (Vec<usize>, Vec<[f64; 3]>, Geometry<F>) {
-    let chunks: Vec<&[usize]> = pixels.chunks(GATHER_CHUNK).collect();
-    let counts: Vec<usize> = chunks
+) -> (Gathered, Geometry<F>) {
+    let tasks: Vec<&[usize]> = pixels.chunks(TASK_PIXELS).collect();
+    let counts: Vec<(usize, usize)> = tasks
         .par_iter()
-        .map(|chunk| {
-            chunk
-                .iter()
-                .flat_map(|&p| sub_samples(records, p))
-                .filter(|&s| stored(records, s))
-                .count()
+        .map(|task| {
+            let stored_of = |&p: &usize| sub_samples(records, p).filter(|&s| stored(records, s));
+            let depth = task.iter().map(|p| stored_of(p).count()).max();
+            let count = task.iter().map(|p| stored_of(p).count()).sum();
+            (depth.unwrap_or(0), count)
         })
         .collect();
-    let mut geometry = Geometry::<F>::zeroed(counts.iter().sum(), indirect);
+    let mut blocks = Vec::with_capacity(tasks.len());
+    let mut first = 0;
+    for (task, &(depth, _)) in tasks.iter().zip(&counts) {
+        blocks.push(Block {
+            first,
+            pixels: task.len(),
+            depth,
+        });
+        first += depth * task.len();
+    }
+    let slots: Vec<usize> = blocks.iter().map(|b| b.depth * b.pixels).collect();
+    let mut geometry = Geometry::<F>::zeroed(first, indirect);
     let (real, [node_i, node_o]) = geometry.lanes_mut();
-    // Per chunk: its part of every array.
+    // Per task: its part of every array.
     let mut real: Vec<std::vec::IntoIter<&mut [F]>> = real
         .into_iter()
-        .map(|lane| split_by_counts(lane, &counts).into_iter())
+        .map(|lane| split_by_counts(lane, &slots).into_iter())
         .collect();
-    let mut nodes = [node_i, node_o].map(|lane| split_by_counts(lane, &counts).into_iter());
-    let parts: Vec<(Vec<&mut [F]>, [&mut [u32]; 2])> = counts
+    let mut nodes = [node_i, node_o].map(|lane| split_by_counts(lane, &slots).into_iter());
+    let parts: Vec<(Vec<&mut [F]>, [&mut [u32]; 2])> = slots
         .iter()
         .map(|_| {
             let real = real
                 .iter_mut()
-                .map(|lane| lane.next().expect("a part per chunk"));
+                .map(|lane| lane.next().expect("a part per task"));
             let [i, o] = &mut nodes;
-            let nodes = [i.next(), o.next()].map(|n| n.expect("a part per chunk"));
+            let nodes = [i.next(), o.next()].map(|n| n.expect("a part per task"));
             (real.collect(), nodes)
         })
         .collect();
     let norm = 1.0 / records.samples_per_pixel as f64;
-    let filled: Vec<(Vec<usize>, Vec<[f64; 3]>)> = chunks
+    let padding = padding(indirect);
+    let lambert: Vec<Vec<[f64; 3]>> = tasks
         .into_par_iter()
         .zip(parts)
-        .map(|(chunk, (mut real, [node_i, node_o]))| {
-            let mut ends = Vec::with_capacity(chunk.len());
-            let mut lambert_sums = Vec::with_capacity(chunk.len());
-            let mut k = 0;
-            for &p in chunk {
-                let mut lambert = [0.0; 3];
-                for s in sub_samples(records, p) {
-                    let e = records.irradiance[s];
-                    for c in 0..3 {
-                        lambert[c] += e[c] * FRAC_1_PI;
-                    }
-                    if !stored(records, s) {
-                        continue;
-                    }
-                    let (wi, wo) = (records.wi[s], records.wo[s]);
-                    let sum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
-                    let len = (sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]).sqrt();
-                    let h = sum.map(|v| v / len);
-                    let (values, [n_i, n_o]) =
-                        Geometry::<F>::record_values(wi, wo, h, e.map(|e| e * norm), indirect);
-                    for (lane, value) in real.iter_mut().zip(values) {
-                        lane[k] = F::c(value);
-                    }
-                    (node_i[k], node_o[k]) = (n_i, n_o);
-                    k += 1;
+        .map(|(task, (mut real, [node_i, node_o]))| {
+            let width = task.len();
+            let depth = node_i.len() / width.max(1);
+            let mut write = |slot: usize, (values, nodes): &([f64; REAL_LANES], [u32; 2])| {
+                for (lane, &value) in real.iter_mut().zip(values) {
+                    lane[slot] = F::c(value);
                 }
-                lambert_sums.push(lambert.map(|v| v * norm));
-                ends.push(k);
-            }
-            (ends, lambert_sums)
+                (node_i[slot], node_o[slot]) = (nodes[0], nodes[1]);
+            };
+            task.iter()
+                .enumerate()
+                .map(|(i, &p)| {
+                    let mut lambert = [0.0; 3];
+                    let mut k = 0;
+                    for s in sub_samples(records, p) {
+                        let e = records.irradiance[s];
+                        for c in 0..3 {
+                            lambert[c] += e[c] * FRAC_1_PI;
+                        }
+                        if !stored(records, s) {
+                            continue;
+                        }
+                        let (wi, wo) = (records.wi[s], records.wo[s]);
+                        let sum = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
+                        let len = (sum[0] * sum[0] + sum[1] * sum[1] + sum[2] * sum[2]).sqrt();
+                        let h = sum.map(|v| v / len);
+                        let weight = e.map(|e| e * norm);
+                        let record = Geometry::<F>::record_values(wi, wo, h, weight, indirect);
+                        write(k * width + i, &record);
+                        k += 1;
+                    }
+                    for k in k..depth {
+                        write(k * width + i, &padding);
+                    }
+                    lambert.map(|v| v * norm)
+                })
+                .collect()
         })
         .collect();
-    let mut start = Vec::with_capacity(pixels.len() + 1);
-    let mut lambert = Vec::with_capacity(pixels.len());
-    start.push(0);
-    let mut offset = 0;
-    for ((ends, sums), count) in filled.iter().zip(&counts) {
-        start.extend(ends.iter().map(|e| e + offset));
-        lambert.extend_from_slice(sums);
-        offset += count;
-    }
-    (start, lambert, geometry)
+    let gathered = Gathered {
+        blocks,
+        records: counts.iter().map(|&(_, count)| count).sum(),
+        lambert: lambert.concat(),
+    };
+    (gathered, geometry)
 }
 
-/// Pixels per parallel task of [`gather`].
-const GATHER_CHUNK: usize = 4096;
+/// The record of a slot no sub-sample fills ([`Block`]): both directions and the half vector
+/// along the normal, where every lobe is finite for any roughness, and weight zero, so that
+/// it adds exactly zero to its pixel's sums.
+fn padding(indirect: bool) -> ([f64; REAL_LANES], [u32; 2]) {
+    let normal = [0.0, 0.0, 1.0];
+    Geometry::<f64>::record_values(normal, normal, normal, [0.0; 3], indirect)
+}
 
 /// The sub-samples of pixel `p`.
 fn sub_samples(records: &ShadingRecords, p: usize) -> std::ops::Range<usize> {
@@ -744,34 +775,107 @@ fn split_by_counts<'a, T>(mut slice: &'a mut [T], counts: &[usize]) -> Vec<&'a m
         .collect()
 }
 
-/// [`Lanes`] for the records in `range`, in the widest SIMD instruction set the CPU has
-/// (checked at run time; the loops are compiled once per set).
-fn fill_lanes<F: LaneFloat>(
+/// [`Lanes`] for the slots of `block`, and their pixel sums into `pixels`, in the widest SIMD
+/// instruction set the CPU has (checked at run time; the loops are compiled once per set).
+fn evaluate<F: LaneFloat>(
     geometry: &Geometry<F>,
     lobe: &Lobe,
-    range: std::ops::Range<usize>,
-    tangents: bool,
+    block: Block,
+    pixels: Pixels,
     lanes: &mut Lanes<F>,
 ) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the CPU has the features the function is compiled for.
-            return unsafe { fill_lanes_avx512(geometry, lobe, range, tangents, lanes) };
+            return unsafe { evaluate_avx512(geometry, lobe, block, pixels, lanes) };
         }
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: as above.
-            return unsafe { fill_lanes_avx2(geometry, lobe, range, tangents, lanes) };
+            return unsafe { evaluate_avx2(geometry, lobe, block, pixels, lanes) };
         }
     }
-    fill_lanes_any(geometry, lobe, range, tangents, lanes)
+    evaluate_any(geometry, lobe, block, pixels, lanes)
 }
 
-compiled_for!(fill_lanes_avx512, "avx512f,avx2,fma");
-compiled_for!(fill_lanes_avx2, "avx2,fma");
+compiled_for!(evaluate_avx512, "avx512f,avx2,fma");
+compiled_for!(evaluate_avx2, "avx2,fma");
 
-/// The lanes' loops, inlined into each instruction-set variant of [`fill_lanes`].
+/// [`evaluate`]'s loops, inlined into each instruction-set variant.
+#[inline(always)]
+fn evaluate_any<F: LaneFloat>(
+    geometry: &Geometry<F>,
+    lobe: &Lobe,
+    block: Block,
+    pixels: Pixels,
+    lanes: &mut Lanes<F>,
+) {
+    let tangents = pixels.tangents.is_some();
+    fill_lanes_any(geometry, lobe, block.slots(), tangents, lanes);
+    let Lanes {
+        fresnel,
+        by_ax,
+        by_ay,
+        d_fresnel_a,
+        d_fresnel_b,
+        sums,
+        ..
+    } = lanes;
+    let quantities = if tangents { 5 } else { 1 };
+    let lanes = [fresnel, by_ax, by_ay, d_fresnel_a, d_fresnel_b];
+    for (lane, sums) in lanes.into_iter().zip(sums.iter_mut()).take(quantities) {
+        for (lane, sums) in lane.iter().zip(sums) {
+            row_sums(&lane[..block.depth * block.pixels], block.pixels, sums);
+        }
+    }
+    write_pixels(sums, pixels);
+}
+
+/// The pixels' values and tangents from [`Lanes::sums`]: every element of `pixels`' slices
+/// is written ([`BatchRecords::run`] relies on it).
+#[inline(always)]
+fn write_pixels(sums: &[[Vec<f64>; 3]; 5], pixels: Pixels) {
+    let [value, rest @ ..] = sums;
+    let (d, [v0, v1, v2]) = (pixels.diffuse, value);
+    let n = pixels.values.len();
+    assert!([v0, v1, v2].iter().all(|v| v.len() == n), "a sum per pixel");
+    if d == [0.0; 3] {
+        // Without a diffuse layer, the Lambertian sums (as large as the values) are not read.
+        for (((out, a), b), c) in pixels.values.iter_mut().zip(v0).zip(v1).zip(v2) {
+            out.write([*a, *b, *c]);
+        }
+    } else {
+        let values = pixels.values.iter_mut().zip(pixels.lambert);
+        for ((((out, l), a), b), c) in values.zip(v0).zip(v1).zip(v2) {
+            out.write([a + d[0] * l[0], b + d[1] * l[1], c + d[2] * l[2]]);
+        }
+    }
+    for ([a, b, c], out) in rest.iter().zip(pixels.tangents.into_iter().flatten()) {
+        assert!(
+            out.len() == n && [a, b, c].iter().all(|v| v.len() == n),
+            "a sum per pixel"
+        );
+        for (((out, a), b), c) in out.iter_mut().zip(a).zip(b).zip(c) {
+            out.write([*a, *b, *c]);
+        }
+    }
+}
+
+/// `sums[i]`: the sum in `f64` of `lane[k * pixels + i]` over the rows `k`, added in row order
+/// (a pixel's records in index order; see [`Block`]).
+#[inline(always)]
+fn row_sums<F: LaneFloat>(lane: &[F], pixels: usize, sums: &mut Vec<f64>) {
+    sums.clear();
+    sums.resize(pixels, 0.0);
+    for row in lane.chunks_exact(pixels.max(1)) {
+        for (sum, value) in sums.iter_mut().zip(row) {
+            *sum += value.re64();
+        }
+    }
+}
+
+/// The lanes' loops of [`evaluate_any`].
 #[inline(always)]
 fn fill_lanes_any<F: LaneFloat>(
     geometry: &Geometry<F>,
@@ -781,6 +885,22 @@ fn fill_lanes_any<F: LaneFloat>(
     lanes: &mut Lanes<F>,
 ) {
     let single = lobe.single;
+    let fused =
+        !tangents && matches!(lobe.added, Added::None) && single.microfacet.ndf == NdfKind::Ggx;
+    match single.fresnel {
+        Fresnel::Schlick { f0 } if fused => {
+            let schlick = SchlickLanes(f0.0.map(F::c));
+            return fused_lanes(geometry, GgxLobe::new(single), schlick, range, lanes);
+        }
+        Fresnel::Conductor { eta, k } if fused => {
+            let conductor = ConductorLanes {
+                eta: eta.0.map(F::c),
+                k: k.0.map(F::c),
+            };
+            return fused_lanes(geometry, GgxLobe::new(single), conductor, range, lanes);
+        }
+        _ => {}
+    }
     lobes(geometry, single, range.clone(), tangents, lanes);
     fresnels(
         &single.fresnel,
@@ -1272,16 +1392,7 @@ fn ggx_lobes<F: LaneFloat, const TANGENTS: bool>(
     range: std::ops::Range<usize>,
     lanes: &mut Lanes<F>,
 ) {
-    let mf = &single.microfacet;
-    let (ax, ay) = (mf.ax, mf.ay);
-    let correlated = single.height == Height::Correlated;
-    let k = F::c(if correlated { 0.5 } else { 1.0 } / (std::f64::consts::PI * ax * ay));
-    let (ax2, ay2) = (F::c(ax * ax), F::c(ay * ay));
-    let (inv_ax2, inv_ay2) = (F::c(1.0 / (ax * ax)), F::c(1.0 / (ay * ay)));
-    // `[a, 1/a, 4/a^3]` of each axis, for `d ln D / d a`.
-    let x_consts = [ax, 1.0 / ax, 4.0 / (ax * ax * ax)].map(F::c);
-    let y_consts = [ay, 1.0 / ay, 4.0 / (ay * ay * ay)].map(F::c);
-    let one = F::one();
+    let ggx = GgxLobe::<F>::new(single);
     let n = range.len();
     let [hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz] = geometry.directions(range);
     let lobe = &mut lanes.lobe[..n];
@@ -1291,35 +1402,88 @@ fn ggx_lobes<F: LaneFloat, const TANGENTS: bool>(
         &mut lanes.d_ay[..tangent_len],
     );
     for l in 0..n {
-        let t = hx2[l] * inv_ax2 + hy2[l] * inv_ay2 + hz2[l];
-        let (zi, zo) = (iz[l], oz[l]);
-        let ri = (zi * zi + ax2 * ix2[l] + ay2 * iy2[l]).sqrt();
-        let ro = (zo * zo + ax2 * ox2[l] + ay2 * oy2[l]).sqrt();
+        let directions = [
+            hx2[l], hy2[l], hz2[l], ix2[l], iy2[l], iz[l], ox2[l], oy2[l], oz[l],
+        ];
+        let [value, by_ax, by_ay] = ggx.at::<TANGENTS>(directions);
+        lobe[l] = value;
+        if TANGENTS {
+            d_ax[l] = by_ax;
+            d_ay[l] = by_ay;
+        }
+    }
+}
+
+/// GGX's lobe at one roughness and height model, in the lanes' type: the constants of
+/// [`ggx_lobes`]'s formulas, and one record's lobe from them.
+#[derive(Clone, Copy)]
+struct GgxLobe<F> {
+    correlated: bool,
+    /// `K`: `1 / (2 pi ax ay)` (correlated) or `1 / (pi ax ay)` (uncorrelated).
+    k: F,
+    ax2: F,
+    ay2: F,
+    inv_ax2: F,
+    inv_ay2: F,
+    /// `[a, 1/a, 4/a^3]` of each axis, for `d ln D / d a`.
+    x_consts: [F; 3],
+    y_consts: [F; 3],
+}
+
+impl<F: LaneFloat> GgxLobe<F> {
+    fn new(single: &SingleBounce<f64>) -> Self {
+        let (ax, ay) = (single.microfacet.ax, single.microfacet.ay);
+        let correlated = single.height == Height::Correlated;
+        GgxLobe {
+            correlated,
+            k: F::c(if correlated { 0.5 } else { 1.0 } / (std::f64::consts::PI * ax * ay)),
+            ax2: F::c(ax * ax),
+            ay2: F::c(ay * ay),
+            inv_ax2: F::c(1.0 / (ax * ax)),
+            inv_ay2: F::c(1.0 / (ay * ay)),
+            x_consts: [ax, 1.0 / ax, 4.0 / (ax * ax * ax)].map(F::c),
+            y_consts: [ay, 1.0 / ay, 4.0 / (ay * ay * ay)].map(F::c),
+        }
+    }
+
+    /// `[lobe, d lobe / d ax, d lobe / d ay]` of the record whose direction values are
+    /// `directions` (in the order of [`Geometry::directions`]); the derivatives are zero
+    /// unless `TANGENTS`.
+    #[inline(always)]
+    fn at<const TANGENTS: bool>(&self, directions: [F; 9]) -> [F; 3] {
+        let [hx2, hy2, hz2, ix2, iy2, zi, ox2, oy2, zo] = directions;
+        let one = F::one();
+        let t = hx2 * self.inv_ax2 + hy2 * self.inv_ay2 + hz2;
+        let ri = (zi * zi + self.ax2 * ix2 + self.ay2 * iy2).sqrt();
+        let ro = (zo * zo + self.ax2 * ox2 + self.ay2 * oy2).sqrt();
         let (ai, ao) = (ri + zi, ro + zo);
-        let q = if correlated {
+        let q = if self.correlated {
             zo * ri + zi * ro
         } else {
             ai * ao
         };
         let inv = one / (t * t * q);
-        let value = k * inv;
-        lobe[l] = value;
-        if TANGENTS {
-            let (inv_t, inv_q) = (t * q * inv, t * t * inv);
-            let (inv_ri, inv_ro) = (one / ri, one / ro);
-            let by = |[a, inv_a, four_inv_a3]: [F; 3], h2: F, i2: F, o2: F| {
-                let dln_d = four_inv_a3 * h2 * inv_t - inv_a;
-                let (dri, dro) = (a * i2 * inv_ri, a * o2 * inv_ro);
-                let dq = if correlated {
-                    zo * dri + zi * dro
-                } else {
-                    dri * ao + ai * dro
-                };
-                value * (dln_d - dq * inv_q)
-            };
-            d_ax[l] = by(x_consts, hx2[l], ix2[l], ox2[l]);
-            d_ay[l] = by(y_consts, hy2[l], iy2[l], oy2[l]);
+        let value = self.k * inv;
+        if !TANGENTS {
+            return [value, F::zero(), F::zero()];
         }
+        let (inv_t, inv_q) = (t * q * inv, t * t * inv);
+        let (inv_ri, inv_ro) = (one / ri, one / ro);
+        let by = |[a, inv_a, four_inv_a3]: [F; 3], h2: F, i2: F, o2: F| {
+            let dln_d = four_inv_a3 * h2 * inv_t - inv_a;
+            let (dri, dro) = (a * i2 * inv_ri, a * o2 * inv_ro);
+            let dq = if self.correlated {
+                zo * dri + zi * dro
+            } else {
+                dri * ao + ai * dro
+            };
+            value * (dln_d - dq * inv_q)
+        };
+        [
+            value,
+            by(self.x_consts, hx2, ix2, ox2),
+            by(self.y_consts, hy2, iy2, oy2),
+        ]
     }
 }
 
@@ -1414,15 +1578,6 @@ fn fresnels<F: LaneFloat>(fresnel: &Fresnel<f64>, cos: &[F], tangents: bool, lan
         }
     }
     let (zero, one) = (F::zero(), F::one());
-    let unit = |cos: F| {
-        if cos < zero {
-            zero
-        } else if cos > one {
-            one
-        } else {
-            cos
-        }
-    };
     for c in 0..3 {
         let value = &mut lanes.fresnel[c][..n];
         let (by_a, by_b) = if tangents {
@@ -1442,10 +1597,9 @@ fn fresnels<F: LaneFloat>(fresnel: &Fresnel<f64>, cos: &[F], tangents: bool, lan
                 by_b.fill(zero);
             }
             Fresnel::Schlick { f0 } => {
-                let f0 = F::c(f0.0[c]);
+                let schlick = SchlickLanes(f0.0.map(F::c));
                 for (v, &cos) in value.iter_mut().zip(cos) {
-                    let m = one - unit(cos);
-                    *v = f0 + (one - f0) * (m * m * m * m * m);
+                    *v = schlick.at(c, cos);
                 }
                 for (d, &cos) in by_a.iter_mut().zip(cos) {
                     let m = one - unit(cos);
@@ -1463,13 +1617,96 @@ fn fresnels<F: LaneFloat>(fresnel: &Fresnel<f64>, cos: &[F], tangents: bool, lan
                         [*v, *a, *b] = slopes.map(F::c);
                     }
                 } else {
-                    let (e, kk) = (F::c(e), F::c(kk));
+                    let conductor = ConductorLanes {
+                        eta: eta.0.map(F::c),
+                        k: k.0.map(F::c),
+                    };
                     for (v, &cos) in value.iter_mut().zip(cos) {
-                        *v = fresnel::conductor(unit(cos), e, kk);
+                        *v = conductor.at(c, cos);
                     }
                 }
             }
         }
+    }
+}
+
+/// `cos` clamped to `[0, 1]`, the range the Fresnel terms take.
+#[inline(always)]
+fn unit<F: LaneFloat>(cos: F) -> F {
+    let (zero, one) = (F::zero(), F::one());
+    if cos < zero {
+        zero
+    } else if cos > one {
+        one
+    } else {
+        cos
+    }
+}
+
+/// A Fresnel term with parameters per channel, evaluated in the lanes' type: what the value
+/// passes ([`fresnels`], [`fused_values`]) share.
+trait LaneFresnel<F>: Copy {
+    /// `F(cos)` of channel `c`.
+    fn at(&self, c: usize, cos: F) -> F;
+}
+
+/// Schlick's `F0 + (1 - F0)(1 - cos)^5` (Schlick 1994 eq. 24), `F0` per channel.
+#[derive(Clone, Copy)]
+struct SchlickLanes<F>([F; 3]);
+
+impl<F: LaneFloat> LaneFresnel<F> for SchlickLanes<F> {
+    #[inline(always)]
+    fn at(&self, c: usize, cos: F) -> F {
+        let (one, f0) = (F::one(), self.0[c]);
+        let m = one - unit(cos);
+        f0 + (one - f0) * (m * m * m * m * m)
+    }
+}
+
+/// A conductor's Fresnel, [`fresnel::conductor`], `eta` and `k` per channel.
+#[derive(Clone, Copy)]
+struct ConductorLanes<F> {
+    eta: [F; 3],
+    k: [F; 3],
+}
+
+impl<F: LaneFloat> LaneFresnel<F> for ConductorLanes<F> {
+    #[inline(always)]
+    fn at(&self, c: usize, cos: F) -> F {
+        fresnel::conductor(unit(cos), self.eta[c], self.k[c])
+    }
+}
+
+/// The lanes of the value of `single` alone (GGX; no added lobe, no tangents) in one loop:
+/// each record's lobe ([`GgxLobe::at`]), its Fresnel per channel and its weight, the same
+/// arithmetic as [`lobes`], [`fresnels`] and [`weigh`] in turn, to the bit, without storing the
+/// lanes between them. Separate passes kept the square roots and divisions of the lobe and
+/// of the Fresnel from overlapping with the rest of the work.
+#[inline(always)]
+fn fused_lanes<F: LaneFloat, R: LaneFresnel<F>>(
+    geometry: &Geometry<F>,
+    ggx: GgxLobe<F>,
+    fresnel: R,
+    range: std::ops::Range<usize>,
+    lanes: &mut Lanes<F>,
+) {
+    let n = range.len();
+    let [hx2, hy2, hz2, ix2, iy2, iz, ox2, oy2, oz] = geometry.directions(range.clone());
+    let cos = &geometry.cos_d[range.clone()];
+    let [w0, w1, w2] = [0, 1, 2].map(|c| &geometry.weight[c][range.clone()]);
+    for lane in &mut lanes.fresnel {
+        lane.resize(n, F::zero());
+    }
+    let [f0, f1, f2] = &mut lanes.fresnel;
+    let (f0, f1, f2) = (&mut f0[..n], &mut f1[..n], &mut f2[..n]);
+    for l in 0..n {
+        let directions = [
+            hx2[l], hy2[l], hz2[l], ix2[l], iy2[l], iz[l], ox2[l], oy2[l], oz[l],
+        ];
+        let [lobe, _, _] = ggx.at::<false>(directions);
+        f0[l] = fresnel.at(0, cos[l]) * (w0[l] * lobe);
+        f1[l] = fresnel.at(1, cos[l]) * (w1[l] * lobe);
+        f2[l] = fresnel.at(2, cos[l]) * (w2[l] * lobe);
     }
 }
 

@@ -344,3 +344,48 @@ fn expm1_covers_the_albedo_tables() {
     // Near 0, where `e^x - 1` by a subtraction would keep no digits.
     assert!((expm1(1e-9f64) / f64::exp_m1(1e-9) - 1.0).abs() < 1e-15);
 }
+
+/// The record-major blocks ([`Block`]) keep the pixels' sums exact: a pixel none of whose
+/// sub-samples is a record (all unlit, or all with `wo` below the horizon) gets its Lambertian
+/// layer alone and zero tangents from its padded slots; and the fused value pass
+/// ([`fused_lanes`]) gives the values of the separate passes of the tangents' render to the
+/// bit (GGX, Schlick, both lane precisions), over pixels of 0 to 4 records.
+#[test]
+fn padded_slots_add_nothing_and_the_fused_pass_is_the_tangent_pass() {
+    let mut records = random_records(3000, 5);
+    let spp = records.samples_per_pixel;
+    // Pixels 7 and 2000: no records (unlit; below the horizon), beside full pixels.
+    for s in 7 * spp..8 * spp {
+        records.irradiance[s] = [0.0; 3];
+    }
+    for s in 2000 * spp..2001 * spp {
+        records.wo[s][2] = -records.wo[s][2].abs();
+    }
+    let pixels: Vec<usize> = (0..records.pixel_count()).collect();
+    let diffuse = [0.1, 0.2, 0.3];
+    let schlick = Fresnel::Schlick {
+        f0: Rgb([0.9, 0.6, 0.04]),
+    };
+    for precision in [Precision::F32, Precision::F64] {
+        let batch = BatchRecords::with_precision(&records, &pixels, precision);
+        for single in surfaces() {
+            if single.microfacet.ndf != NdfKind::Ggx {
+                continue;
+            }
+            let single = SingleBounce {
+                fresnel: schlick,
+                ..single
+            };
+            let values = batch.render(&single, diffuse);
+            let (with_tangents, tangents) = batch.render_with_tangents(&single, diffuse);
+            assert_eq!(values, with_tangents, "{precision:?} {single:?}");
+            for p in [7, 2000] {
+                let lambert = batch.lambert()[p];
+                assert_eq!(values[p], [0, 1, 2].map(|c| diffuse[c] * lambert[c]));
+                for lane in [&tangents.ax, &tangents.ay, &tangents.fresnel_a] {
+                    assert_eq!(lane[p], [0.0; 3]);
+                }
+            }
+        }
+    }
+}
