@@ -9,6 +9,7 @@
 //! | `scalar_ns_per_eval` | thread CPU time per [`crate::bsdf::Brdf::eval`] of `single` |
 //! | `batch_ns_per_eval` | thread CPU time per pair of [`BatchRecords::render`] (one record per pixel) with `f32` lanes, the fits' default, geometry prepared once as a fit prepares it |
 //! | `batch_f64_ns_per_eval` | the same with `f64` lanes |
+//! | `batch_fit_layout_ns_per_eval` | `batch_ns_per_eval` with the pairs taken [`FIT_PIXEL_SAMPLES`] to a pixel, as `fit` lays out its sub-samples by default: the kernel's cost per evaluation where a fit spends it, with a quarter of the pixel sums and outputs |
 //! | `kulla_conty_ns_per_eval`, `kulla_conty_f64_ns_per_eval` | the same two for `kulla-conty` (single lobe and compensation lobe, [`Lobe::of`]) at the same material: the cost of its added lobe in the kernel |
 //! | `fast_msx_ns_per_eval`, `fast_msx_f64_ns_per_eval` | the same two for `fast-msx` (single lobe and its second-bounce lobe) |
 //! | `tangents_ns_per_eval`, `tangents_f64_ns_per_eval` | the same two for `single` with the derivatives by roughness, Fresnel and albedo ([`BatchRecords::render_with_tangents`]): what a gradient-based fit evaluates |
@@ -32,6 +33,9 @@ use std::time::Instant;
 /// timing is of the arithmetic, not of one call's overhead.
 pub const PAIRS_PER_CONFIGURATION: usize = 256;
 
+/// Sub-samples per pixel of `fit`'s default (`--pixel-samples`).
+pub const FIT_PIXEL_SAMPLES: usize = 4;
+
 /// The kernel row of the bench report (see the module table).
 #[derive(Clone, Debug, Serialize)]
 pub struct KernelRow {
@@ -39,6 +43,7 @@ pub struct KernelRow {
     pub scalar_ns_per_eval: f64,
     pub batch_ns_per_eval: f64,
     pub batch_f64_ns_per_eval: f64,
+    pub batch_fit_layout_ns_per_eval: f64,
     pub kulla_conty_ns_per_eval: f64,
     pub fast_msx_ns_per_eval: f64,
     pub fast_msx_f64_ns_per_eval: f64,
@@ -68,6 +73,18 @@ fn records(pairs: usize, seed: u64) -> ShadingRecords {
         .map(|c| ([c.wi.x, c.wi.y, c.wi.z], [c.wo.x, c.wo.y, c.wo.z]))
         .collect();
     ShadingRecords::of_pairs("kernel", &pairs)
+}
+
+/// `records` of [`records`] with their pairs taken [`FIT_PIXEL_SAMPLES`] to a pixel, each
+/// pixel the mean of its pairs' values.
+fn in_fit_layout(records: &ShadingRecords) -> ShadingRecords {
+    let pixels = records.pixel_count() / FIT_PIXEL_SAMPLES;
+    let mut grouped = records.clone();
+    grouped.samples_per_pixel = FIT_PIXEL_SAMPLES;
+    grouped.photos[0].width = pixels;
+    grouped.weight.truncate(pixels);
+    grouped.target.truncate(pixels);
+    grouped
 }
 
 /// Thread CPU ns per pair of `work` over `pairs` pairs, repeated for at least `seconds`.
@@ -128,6 +145,14 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
             (Model::Single, Precision::F64, true),
         ]
         .map(|(model, precision, tangents)| batch_ns(model, precision, tangents));
+        let fit_layout = {
+            let records = in_fit_layout(&records);
+            let pixels: Vec<usize> = (0..records.pixel_count()).collect();
+            let batch = BatchRecords::for_model(&records, &pixels, Precision::F32, Model::Single);
+            per_pair(pairs, seconds, || {
+                black_box(batch.render(black_box(&single), [0.0; 3]));
+            })
+        };
         let prepare = per_pair(pairs, seconds, || {
             black_box(BatchRecords::new(black_box(&records), &all));
         });
@@ -136,6 +161,7 @@ pub fn measure(configurations: usize, seconds: f64, seed: u64) -> KernelRow {
             scalar_ns_per_eval: scalar,
             batch_ns_per_eval: batch_ns,
             batch_f64_ns_per_eval: batch_f64_ns,
+            batch_fit_layout_ns_per_eval: fit_layout,
             kulla_conty_ns_per_eval: kulla_conty_ns,
             kulla_conty_f64_ns_per_eval: kulla_conty_f64_ns,
             fast_msx_ns_per_eval: fast_msx_ns,
@@ -170,8 +196,21 @@ mod tests {
                 }
             }
         }
+        // The fit's layout: each pixel is the mean of its four pairs' values.
+        let grouped = in_fit_layout(&records);
+        let pixels: Vec<usize> = (0..grouped.pixel_count()).collect();
+        let means = BatchRecords::with_precision(&grouped, &pixels, Precision::F64)
+            .render(&material.single(), [0.0; 3]);
+        for (p, mean) in means.iter().enumerate() {
+            let pairs = &scalar[p * FIT_PIXEL_SAMPLES..(p + 1) * FIT_PIXEL_SAMPLES];
+            for c in 0..3 {
+                let expected = pairs.iter().map(|v| v[c]).sum::<f64>() / FIT_PIXEL_SAMPLES as f64;
+                assert!((mean[c] - expected).abs() <= 1e-12 * expected.abs().max(1e-300));
+            }
+        }
         let row = measure(2, 0.0, 1);
         assert_eq!(row.pairs, 2 * PAIRS_PER_CONFIGURATION);
         assert!(row.batch_ns_per_eval > 0.0 && row.scalar_ns_per_eval > 0.0);
+        assert!(row.batch_fit_layout_ns_per_eval > 0.0);
     }
 }

@@ -601,8 +601,8 @@ fn tables(report: &BenchReport) -> String {
     }
     let k = &report.kernel;
     out += &format!(
-        "\nkernel: single (GGX copper, alpha 0.3) over {} pairs, one thread: scalar {:.1} ns/eval, batch {:.2} ns/eval with f32 lanes ({:.1}x), {:.2} with f64 lanes; preparing the batch's geometry once: {:.1} ns/pair; kulla-conty in the batch kernel: {:.2} ns/eval with f32 lanes ({:.2}x single), {:.2} with f64 lanes ({:.2}x); fast-msx: {:.2} ({:.2}x), {:.2} ({:.2}x); single with its derivatives (what a fit evaluates): {:.2} with f32 lanes, {:.2} with f64 lanes\n",
-        k.pairs, k.scalar_ns_per_eval, k.batch_ns_per_eval, k.speedup, k.batch_f64_ns_per_eval, k.batch_prepare_ns_per_eval,
+        "\nkernel: single (GGX copper, alpha 0.3) over {} pairs, one thread: scalar {:.1} ns/eval, batch {:.2} ns/eval with f32 lanes ({:.1}x), {:.2} with f64 lanes, {:.2} with f32 lanes and 4 pairs to a pixel as a fit lays them out; preparing the batch's geometry once: {:.1} ns/pair; kulla-conty in the batch kernel: {:.2} ns/eval with f32 lanes ({:.2}x single), {:.2} with f64 lanes ({:.2}x); fast-msx: {:.2} ({:.2}x), {:.2} ({:.2}x); single with its derivatives (what a fit evaluates): {:.2} with f32 lanes, {:.2} with f64 lanes\n",
+        k.pairs, k.scalar_ns_per_eval, k.batch_ns_per_eval, k.speedup, k.batch_f64_ns_per_eval, k.batch_fit_layout_ns_per_eval, k.batch_prepare_ns_per_eval,
         k.kulla_conty_ns_per_eval, k.kulla_conty_ns_per_eval / k.batch_ns_per_eval,
         k.kulla_conty_f64_ns_per_eval, k.kulla_conty_f64_ns_per_eval / k.batch_f64_ns_per_eval,
         k.fast_msx_ns_per_eval, k.fast_msx_ns_per_eval / k.batch_ns_per_eval,

@@ -13,7 +13,7 @@ Evaluation, one thread each:
 | | ours | Mitsuba 3 |
 | --- | --- | --- |
 | what | `single`, GGX, height-correlated, copper conductor, alpha 0.3 | `roughconductor`, GGX, the same copper `eta`, `k` as RGB, alpha 0.3 (uncorrelated G2: the same work) |
-| how | the kernel row of `bouncefit bench --no-jobs --quick` (65536 pairs): scalar reference and batch kernel | variant `llvm_ad_rgb`, `bsdf.eval` on `PAIRS` direction pairs in one call; the median of `REPEATS` calls after a warm-up call that compiles the kernel |
+| how | the kernel row of `bouncefit bench --no-jobs --quick` (65536 pairs): scalar reference and batch kernel, one pair to a pixel, and 4 pairs to a pixel as `fit` lays out its sub-samples (a quarter of the pixel sums and outputs) | variant `llvm_ad_rgb`, `bsdf.eval` on `PAIRS` direction pairs in one call; the median of `REPEATS` calls after a warm-up call that compiles the kernel |
 | unit | CPU ns per evaluation | wall ns per evaluation |
 
 Fit of `datasets/copper-flash` (9 flash photos, 128x128, rectified camera), `FIT_THREADS` threads
@@ -271,6 +271,7 @@ def main():
     print()
     evaluation = [
         ("bouncefit single, batch kernel (f32 lanes, SIMD; what fits use)", ours_kernel["batch_ns_per_eval"]),
+        ("  the same, 4 pairs to a pixel (fit's layout)", ours_kernel["batch_fit_layout_ns_per_eval"]),
         ("bouncefit single, batch kernel (f64 lanes, SIMD)", ours_kernel["batch_f64_ns_per_eval"]),
         ("bouncefit single, scalar reference (f64)", ours_kernel["scalar_ns_per_eval"]),
         ("Mitsuba 3 roughconductor, llvm_ad_rgb (f32, SIMD)", theirs_ns),
