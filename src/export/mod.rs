@@ -17,7 +17,7 @@
 //! | fact | rule | source |
 //! | --- | --- | --- |
 //! | base kind | [`Base::Dielectric`] for dielectric Fresnel, and for Schlick with every `F0 < 0.08` plus a nonzero diffuse albedo (plastic-like); [`Base::Metal`] otherwise | [`DIELECTRIC_F0_LIMIT`] |
-//! | equivalent conductor | conductor: itself; dielectric: `eta + 0i` (the same reflectance); Schlick / white: the Gulbrandsen conductor with reflectivity `F0` (capped at [`MAX_REFLECTIVITY`]) whose edge tint is fitted to the Schlick curve by least squares in `cos theta` | Gulbrandsen 2014, JCGT 3(4), eq. 2-5 |
+//! | equivalent conductor | conductor: itself; dielectric: `eta + 0i` (the same reflectance); Schlick / white: the Gulbrandsen conductor with reflectivity `F0` (capped at [`MAX_REFLECTIVITY`](crate::microfacet::fresnel::MAX_REFLECTIVITY)) whose edge tint is fitted to the Schlick curve by least squares in `cos theta` | Gulbrandsen 2014, JCGT 3(4), eq. 2-5 |
 //! | edge tint | Gulbrandsen's `g` of the equivalent conductor | ibid. |
 //! | F82 tint | `F(1/7) / Schlick(F0, 1/7)` of the equivalent conductor, exactly 1 for Schlick | Hoffman 2019 "Generalization of Schlick's Fresnel approximation"; OpenPBR 1.1 spec, section "Metal" |
 //! | multi-bounce energy | white-Fresnel directional albedo at normal incidence of `single` and of the fitted model | [`crate::albedo::directional_albedo`] |
@@ -73,10 +73,6 @@ impl std::str::FromStr for ExportFormat {
 /// Schlick `F0` below this in every channel, with a diffuse albedo, reads as a dielectric
 /// (plastic-like) base rather than a metal: dielectrics have `F0 < 0.08` up to `eta = 1.79`.
 pub const DIELECTRIC_F0_LIMIT: f64 = 0.08;
-
-/// Reflectivity cap of the conductor standing in for a Schlick `F0` near 1: Gulbrandsen's
-/// `n_max` diverges at `r = 1`; at 0.9999 it is about 4e4, finite in single precision.
-pub const MAX_REFLECTIVITY: f64 = 0.9999;
 
 /// The Schlick and the F82-tint models meet the exact curve at `cos theta = 1/7`
 /// (about 82 degrees; Hoffman 2019, OpenPBR 1.1).
@@ -303,7 +299,7 @@ pub fn equivalent_conductor(fresnel: &FresnelSpec) -> EquivalentConductor {
 const FIT_NODES: usize = 256;
 
 /// Per channel, the Gulbrandsen conductor with reflectivity `F0` (capped at
-/// [`MAX_REFLECTIVITY`]) and the edge tint [`schlick_edge_tint`].
+/// [`MAX_REFLECTIVITY`](crate::microfacet::fresnel::MAX_REFLECTIVITY)) and the edge tint [`schlick_edge_tint`].
 fn schlick_conductor(f0: [f64; 3]) -> EquivalentConductor {
     let mut eta = [0.0; 3];
     let mut k = [0.0; 3];
@@ -316,9 +312,9 @@ fn schlick_conductor(f0: [f64; 3]) -> EquivalentConductor {
 }
 
 /// The Gulbrandsen conductor `(eta, k)` with reflectivity `f0` (capped at
-/// [`MAX_REFLECTIVITY`]) and edge tint `g`.
+/// [`MAX_REFLECTIVITY`](crate::microfacet::fresnel::MAX_REFLECTIVITY)) and edge tint `g`.
 fn schlick_conductor_channel(f0: f64, g: f64) -> (f64, f64) {
-    ior_from_reflectivity_edge_tint(f0.min(MAX_REFLECTIVITY), g)
+    ior_from_reflectivity_edge_tint(f0, g)
 }
 
 /// The edge tint in [0, 1] whose Gulbrandsen conductor with reflectivity `f0` minimises the
@@ -486,7 +482,7 @@ mod tests {
             let (eta, k) = table.conductor(f0);
             let kept = crate::microfacet::fresnel::conductor_f0(eta, k);
             assert!(
-                (kept - f0.min(MAX_REFLECTIVITY)).abs() < 1e-12,
+                (kept - f0.min(crate::microfacet::fresnel::MAX_REFLECTIVITY)).abs() < 1e-12,
                 "{f0}: {kept}"
             );
             let exact = schlick_conductor([f0; 3]);

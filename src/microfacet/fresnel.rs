@@ -159,14 +159,22 @@ pub fn conductor_f0(eta: f64, k: f64) -> f64 {
     ((eta - 1.0).powi(2) + k * k) / ((eta + 1.0).powi(2) + k * k)
 }
 
+/// Largest reflectivity the Gulbrandsen map takes: its `n_max` diverges at `r = 1`; at 0.9999
+/// it is about 4e4, and the conductor's reflectance stays finite in single precision (the
+/// batch kernel's `f32` lanes square `eta^2 - k^2` once more). Before the cap, a `single` fit
+/// of rough gold rendered by `heitz` pushed red `r` to the sigmoid's `1 - 1e-12`, `eta` to
+/// 4e11, and every `f32` pixel to NaN.
+pub const MAX_REFLECTIVITY: f64 = 0.9999;
+
 /// Gulbrandsen 2014 ("Artist Friendly Metallic Fresnel", JCGT 3(4), eq. 2-5): the complex index
-/// `(eta, k)` with normal reflectivity `r` in [0, 1) and edge tint `g` in [0, 1].
+/// `(eta, k)` with normal reflectivity `r` in [0, 1) (capped at [`MAX_REFLECTIVITY`]) and edge
+/// tint `g` in [0, 1].
 /// `eta = g n_min + (1 - g) n_max` with `n_min = (1 - r) / (1 + r)`,
 /// `n_max = (1 + sqrt r) / (1 - sqrt r)`, and `k = sqrt((r (eta + 1)^2 - (eta - 1)^2) / (1 - r))`.
 /// Generic over the scalar, so the fitter differentiates through it exactly.
 pub fn ior_from_reflectivity_edge_tint<T: Real>(r: T, g: T) -> (T, T) {
     let one = T::one();
-    let r = r.max_c(0.0).min_c(1.0 - 1e-12);
+    let r = r.max_c(0.0).min_c(MAX_REFLECTIVITY);
     let g = g.max_c(0.0).min_c(1.0);
     let n_min = (one - r) / (one + r);
     let sr = r.sqrt();

@@ -191,6 +191,55 @@ fn check_renders(model: Model, pixels: usize, seed: u64) {
     }
 }
 
+/// The corner of a fit's conductor space, reflectivity at its cap
+/// ([`crate::microfacet::fresnel::MAX_REFLECTIVITY`]) with edge tints 0, 0.5 and 1 (`eta` up
+/// to 4e4), renders finite and non-negative values and tangents in both lane precisions, for
+/// every model the kernel serves, near the scalar kernel's values. The conductor's formula
+/// cancels `eta^2 - k^2` of order 1e9 there, so the bound is wider than [`PRECISIONS`]'s
+/// (measured: `f64` within 3.2e-12, `f32` within 2.8e-6, `turquin` at alpha 3). Without the
+/// cap `eta` reached 4e11 and the `f32` lanes overflowed to NaN.
+#[test]
+fn the_corner_of_the_conductor_space_renders_finite_in_both_precisions() {
+    let records = random_records(500, 17);
+    let pixels: Vec<usize> = (0..records.pixel_count()).collect();
+    let [(e0, k0), (e1, k1), (e2, k2)] = [0.0, 0.5, 1.0]
+        .map(|g| crate::microfacet::fresnel::ior_from_reflectivity_edge_tint(1.0, g));
+    let fresnel = Fresnel::Conductor {
+        eta: Rgb([e0, e1, e2]),
+        k: Rgb([k0, k1, k2]),
+    };
+    for model in [
+        Model::Single,
+        Model::Turquin,
+        Model::KullaConty,
+        Model::FastMsx,
+    ] {
+        for (precision, bound) in [(Precision::F64, 1e-11), (Precision::F32, 1e-5)] {
+            let batch = BatchRecords::for_model(&records, &pixels, precision, model);
+            for alpha in [1e-4, 0.3, 3.0] {
+                let single = SingleBounce {
+                    microfacet: Microfacet::new(NdfKind::Ggx, alpha, alpha),
+                    fresnel,
+                    height: Height::Correlated,
+                };
+                let lobe = Lobe::of(model, &single).expect("served");
+                let (values, tangents) = batch.render_with_tangents(lobe, [0.1; 3]);
+                let reference = scalar_render(model, single, [0.1; 3], &records, &pixels);
+                let finite = |v: &[[f64; 3]]| v.iter().flatten().all(|x| x.is_finite());
+                assert!(finite(&values) && values.iter().flatten().all(|v| *v >= 0.0));
+                for t in [&tangents.ax, &tangents.fresnel_a, &tangents.fresnel_b] {
+                    assert!(finite(t), "{model} {precision:?} alpha {alpha}");
+                }
+                let worst = worst_relative_above(&reference, &values, floor(precision));
+                assert!(
+                    worst < bound,
+                    "{model} {precision:?} alpha {alpha}: {worst:e}"
+                );
+            }
+        }
+    }
+}
+
 /// The derivatives of the scalar kernel's render of `model` by one of the kernel's parameters:
 /// `single` in dual numbers seeded as [`seeded`] seeds it.
 fn dual_render(
