@@ -18,8 +18,8 @@
 //! 2. At `theta_k`, estimate the defect `d_k = S(theta_k) - T(theta_k)` at every loss pixel: the
 //!    stochastic model's render minus `tabulated`'s, with [`walks_per_pixel`] walks per pixel.
 //! 3. Fit `tabulated` to the photos minus `d_k`, from `theta_k`: `theta_{k+1}`.
-//! 4. Repeat 2-3 until the last round's move puts the fixed point within [`SETTLED`] of it
-//!    ([`settles`]), at most [`MAX_ROUNDS`].
+//! 4. Repeat 2-3 until the last round's move of the prediction puts the fixed point's
+//!    within [`SETTLED`] of it ([`settles`]), at most [`MAX_ROUNDS`].
 //!
 //! At the fixed point `T(theta) + d(theta) = S(theta)`: the prediction is the stochastic model's
 //! own estimate, so its Fresnel, anisotropy and walk statistics are the model's, not the table's.
@@ -52,7 +52,10 @@ use serde::{Deserialize, Serialize};
 /// Walks of the stochastic model in each defect estimate, over all loss pixels: the defect's
 /// noise moves the fit in proportion to `1 / sqrt(walks)` (a fixed offset of the photos,
 /// averaged by the fit over every pixel), so a budget in total walks holds the fit's precision
-/// at any image size.
+/// at any image size. Measured over seeds 1-4 on 2026-11-28 (docs/speed.md): with 2^21 walks
+/// alpha spread over 0.003-0.03% (`bitterli`, `heitz`, `cui` on the bundled sets; `bitterli`
+/// on a 96x96 pinhole set of gold rendered by `heitz`), with 2^19 over 0.01-0.07% for 0.5-0.9x
+/// the fit's time; the intervals do not count the defect's noise, so the budget stays.
 pub const WALK_BUDGET: usize = 1 << 21;
 
 /// Walks per pixel at least and at most (the most: 64, as measured in docs/fidelity.md on
@@ -67,29 +70,36 @@ pub fn walks_per_pixel(pixels: usize) -> usize {
 /// Rounds of correction at most.
 pub const MAX_ROUNDS: usize = 4;
 
-/// The iteration ends when the fixed point is within this of the last round's coordinates
-/// (ln alpha, logit F0, ...) in every coordinate, as [`settles`] bounds it.
+/// The iteration ends when the fixed point's prediction is within this of the last round's,
+/// as [`prediction_change`] measures it (relative RMS over the loss pixels) and [`settles`]
+/// bounds it. A move of `ln alpha` by `e` moves a specular photo set's prediction by about
+/// `e` (the lobe's peak goes as `1 / alpha^2`, its tails the other way), so the bound holds
+/// alpha to about 0.1%; directions the photos do not determine (a conductor's edge tint along
+/// its valley) move the prediction by little and do not hold the iteration open. Measured on
+/// the 96x96 gold set: rounds moved the edge-tint coordinates by 1.0-1.7 each and the
+/// prediction by 4.4e-3 then 1.6e-3; with the rule in coordinates that fit never settled in
+/// [`MAX_ROUNDS`] (4.4-5.6 s against 2.6-3.3 s now, alpha within 0.01% of each other).
 pub const SETTLED: f64 = 1e-3;
 
 /// Largest contraction of the rounds' map on a well-posed fit: the move of a round over the
 /// move of the round before it. The map's derivative is `tabulated`'s pseudo-inverse Jacobian
 /// times the defect's Jacobian, and the defect is the small part of the multiple-bounce lobe
-/// the table misses, so the map contracts strongly. Measured on 32x32 `heitz` photo sets
-/// (white, copper and gold at alpha 0.2 to 1.5, Fresnel known) and on the bundled sets, for
-/// `heitz`, `bitterli` and `cui`: at most 0.13 (`heitz`, gold, alpha 1.2), typically 0.01 to
-/// 0.07, with one exception: `cui` on white alpha 0.9, whose rounds moved by 1.9e-2, 1.1e-3,
-/// 2.2e-3 and 1.7e-3. Common random numbers keep the walks' streams from round to round, not
-/// their paths, which change discontinuously with the coordinates, so near its fixed point the
-/// map is defined to about 2e-3 there (0.2% in alpha). Where the photos do not separate F0
-/// from alpha (a rough coloured metal with its Fresnel free) the rounds wander along the
-/// valley and the fit does not settle whatever the bound.
+/// the table misses, so the map contracts strongly. Measured in coordinates on 32x32 `heitz`
+/// photo sets (white, copper and gold at alpha 0.2 to 1.5, Fresnel known) and on the bundled
+/// sets, for `heitz`, `bitterli` and `cui`: at most 0.13 (`heitz`, gold, alpha 1.2), typically
+/// 0.01 to 0.07, with one exception: `cui` on white alpha 0.9, whose rounds moved by 1.9e-2,
+/// 1.1e-3, 2.2e-3 and 1.7e-3. In prediction space: 0.006-0.010 on aluminium-pinhole, 0.36 on
+/// the gold set above (its defect changes along the edge-tint valley; the settled fits' alpha
+/// stayed within 0.01% across seeds). Common random numbers keep the walks' streams from round
+/// to round, not their paths, which change discontinuously with the coordinates, so near its
+/// fixed point the map is defined to about 2e-3 there (0.2% in alpha).
 pub const CONTRACTION: f64 = 0.25;
 
-/// Whether a round that moved the coordinates by `moved` (largest over them) leaves the fixed
-/// point within [`SETTLED`]: by the contraction bound the rounds still to come move them by at
-/// most `moved c / (1 - c)` in all. With the bound, a round that moved by up to 3e-3 settles,
-/// which saves the confirming round (a defect render and a refit) that the rule "the last
-/// round moved by at most 1e-3" cost most fits.
+/// Whether a round that moved the prediction by `moved` ([`prediction_change`]) leaves the
+/// fixed point within [`SETTLED`]: by the contraction bound the rounds still to come move it by
+/// at most `moved c / (1 - c)` in all. With the bound, a round that moved by up to 3e-3
+/// settles, which saves the confirming round (a defect render and a refit) that the rule "the
+/// last round moved by at most 1e-3" cost most fits.
 pub fn settles(moved: f64) -> bool {
     moved * CONTRACTION / (1.0 - CONTRACTION) <= SETTLED
 }
@@ -116,6 +126,9 @@ pub struct Correction {
     pub walks_per_pixel: usize,
     /// Roughness after each round, the uncorrected `tabulated` fit first.
     pub alpha_rounds: Vec<[f64; 2]>,
+    /// How far each round moved `tabulated`'s prediction ([`prediction_change`]).
+    #[serde(default)]
+    pub prediction_moves: Vec<f64>,
     /// Whether the last round's move bounds the distance to the fixed point by [`SETTLED`]
     /// ([`settles`]).
     pub settled: bool,
@@ -153,6 +166,8 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
     let (mut fit, mut x) = (first.fit, first.x);
     let mut corrected = records.target.clone();
     let mut settled = false;
+    let mut prediction = objective.predict(&x);
+    let mut prediction_moves = Vec::new();
     for _ in 0..MAX_ROUNDS {
         if fit.material.alpha.iter().any(|&a| a > tabulated::ALPHA_MAX) {
             break;
@@ -166,14 +181,12 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
         objective.retarget(&corrected);
         let next = fit_level_on(&objective, records, &surrogate, Some(x.clone()), false)?;
         evaluations += next.evaluations;
-        let next_x = next.point(&surrogate.space);
-        let moved = next_x
-            .iter()
-            .zip(&x)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        x = next.point(&surrogate.space);
+        let next_prediction = objective.predict(&x);
+        let moved = prediction_change(records, &pixels, &prediction, &next_prediction);
+        prediction_moves.push(moved);
         alpha_rounds.push(next.material.alpha);
-        (fit, x) = (next, next_x);
+        (fit, prediction) = (next, next_prediction);
         if settles(moved) {
             settled = true;
             break;
@@ -194,6 +207,7 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
         surrogate: Model::Tabulated,
         walks_per_pixel: walks * records.samples_per_pixel,
         alpha_rounds,
+        prediction_moves,
         settled,
     });
     fit.exposure = super::exposure::estimate(options.space, &x);
@@ -213,6 +227,27 @@ fn defect_streams(records: &ShadingRecords, seed: u64) -> (Vec<usize>, Vec<u64>)
         .map(|w| seed.wrapping_add(DEFECT_STREAMS).wrapping_add(w))
         .collect();
     (pixels, seeds)
+}
+
+/// How far a round moved the prediction: the RMS of `after - before` over the loss `pixels`
+/// (weighted as the loss weights them, every channel), relative to the photos' RMS there.
+/// Coordinates the photos do not determine (a conductor's edge tint along its valley) move
+/// the prediction by nothing, and the rounds' noise in them does not keep the iteration going.
+pub fn prediction_change(
+    records: &ShadingRecords,
+    pixels: &[usize],
+    before: &[[f64; 3]],
+    after: &[[f64; 3]],
+) -> f64 {
+    let (mut moved, mut photos) = (0.0, 0.0);
+    for ((&p, b), a) in pixels.iter().zip(before).zip(after) {
+        let w = records.weight[p];
+        for c in 0..3 {
+            moved += w * (a[c] - b[c]).powi(2);
+            photos += w * records.target[p][c].powi(2);
+        }
+    }
+    (moved / photos.max(f64::MIN_POSITIVE)).sqrt()
 }
 
 /// `S - T` at `pixels`: the stochastic `model`'s render at `fit`'s material, the mean over
@@ -251,14 +286,16 @@ mod tests {
     use crate::fit::point::params::ParamSpace;
     use crate::material::FresnelSpec;
 
-    /// The stopping rule ([`settles`]) assumes that each round moves the point by at most
-    /// [`CONTRACTION`] of the move before it, so that a settled fit is within [`SETTLED`] of
-    /// the rounds' fixed point. On `heitz` photos of rough copper (known Fresnel, the pinhole
-    /// template at 48 x 48): every recorded round contracts by at most `CONTRACTION`, and one
-    /// more round from the settled point, on the same walks, moves `ln alpha` by at most
-    /// `SETTLED`. A rule that stopped early, or rounds that did not contract, fail here.
-    /// Measured: the rounds moved `ln alpha` by 4.9e-3 and 3.4e-5, one more round by 1.3e-5,
-    /// and alpha came out 0.8924 (the photos' walks are noisy at 4 sub-samples).
+    /// The stopping rule ([`settles`]) assumes that each round moves the prediction by at
+    /// most [`CONTRACTION`] of the move before it, so that a settled fit is within [`SETTLED`]
+    /// of the rounds' fixed point. On `heitz` photos of rough copper (known Fresnel, the
+    /// pinhole template at 48 x 48): every recorded round contracts by at most `CONTRACTION`,
+    /// in the prediction and in `ln alpha`, including one more round from the settled point on
+    /// the same walks, which moves the prediction and `ln alpha` by at most `SETTLED`. A rule
+    /// that stopped early, or rounds that did not contract, fail here. Measured: the one round
+    /// moved the prediction by 2.3e-3 and `ln alpha` by 4.9e-3 and settled; one more moved
+    /// them by 1.6e-5 and 3.4e-5; alpha came out 0.8925 (the photos' walks are noisy at 4
+    /// sub-samples).
     #[test]
     fn one_more_round_after_settling_stays_within_the_bound() {
         let copper = FresnelSpec::Schlick {
@@ -275,13 +312,9 @@ mod tests {
         let correction = fitted.fit.correction.clone().expect("a corrected fit");
         assert!(correction.settled, "{:?}", correction.alpha_rounds);
         let ln_alphas: Vec<f64> = correction.alpha_rounds.iter().map(|a| a[0].ln()).collect();
-        let moves: Vec<f64> = ln_alphas.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-        for pair in moves.windows(2) {
-            assert!(
-                pair[1] <= CONTRACTION * pair[0],
-                "rounds moved {moves:?}: not contracting by {CONTRACTION}"
-            );
-        }
+        let mut moves: Vec<f64> = ln_alphas.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+        let mut predicted = correction.prediction_moves.clone();
+        assert_eq!(predicted.len(), moves.len());
 
         // One more round, as `fit` runs them, from the settled point.
         let surrogate = FitOptions {
@@ -302,6 +335,7 @@ mod tests {
             }
         }
         let mut objective = objective_of(&records, &surrogate);
+        let before = objective.predict(&fitted.x);
         objective.retarget(&corrected);
         let next = fit_level_on(
             &objective,
@@ -311,15 +345,58 @@ mod tests {
             false,
         )
         .unwrap();
-        let moved = (next.material.alpha[0].ln() - ln_alphas[ln_alphas.len() - 1]).abs();
+        let after = objective.predict(&next.point(&surrogate.space));
+        let moved = prediction_change(&records, &pixels, &before, &after);
+        let moved_alpha = (next.material.alpha[0].ln() - ln_alphas[ln_alphas.len() - 1]).abs();
         assert!(
-            moved <= SETTLED,
-            "one more round moved ln alpha by {moved:e} after rounds {moves:?}"
+            moved <= SETTLED && moved_alpha <= SETTLED,
+            "one more round moved the prediction by {moved:e}, ln alpha by {moved_alpha:e} \
+             after rounds {predicted:?}, {moves:?}"
         );
+        predicted.push(moved);
+        moves.push(moved_alpha);
+        for (what, moves) in [("the prediction", &predicted), ("ln alpha", &moves)] {
+            for pair in moves.windows(2) {
+                assert!(
+                    pair[1] <= CONTRACTION * pair[0],
+                    "rounds moved {what} by {moves:?}: not contracting by {CONTRACTION}"
+                );
+            }
+        }
         assert!(
             (fitted.fit.material.alpha[0] / 0.9 - 1.0).abs() < 0.02,
             "alpha {}",
             fitted.fit.material.alpha[0]
         );
+    }
+
+    /// The change is relative to the photos: a prediction equal to the photos scaled by
+    /// `1 + e` moved by `e` from them; pixels count by their loss weight.
+    #[test]
+    fn prediction_change_is_relative_rms_of_the_weighted_pixels() {
+        let space = ParamSpace::plain(Model::Single);
+        let mut records = pinhole_records(&space.material(&[0.3f64.ln(), 0.0, 0.0, 0.0]));
+        let pixels: Vec<usize> = (0..records.pixel_count())
+            .filter(|&p| records.weight[p] > 0.0)
+            .collect();
+        let photos: Vec<[f64; 3]> = pixels.iter().map(|&p| records.target[p]).collect();
+        let scaled: Vec<[f64; 3]> = photos.iter().map(|v| v.map(|c| c * 1.01)).collect();
+        let moved = prediction_change(&records, &pixels, &photos, &scaled);
+        assert!((moved - 0.01).abs() < 1e-12, "{moved}");
+        assert_eq!(prediction_change(&records, &pixels, &photos, &photos), 0.0);
+
+        // Doubling every weight changes nothing; moving one pixel only counts by its weight.
+        for p in &pixels {
+            records.weight[*p] *= 2.0;
+        }
+        let again = prediction_change(&records, &pixels, &photos, &scaled);
+        assert!((again - moved).abs() < 1e-12);
+        let k = pixels.len() / 2;
+        let mut one = photos.clone();
+        one[k] = one[k].map(|c| c + 1.0);
+        let light = prediction_change(&records, &pixels, &photos, &one);
+        records.weight[pixels[k]] *= 4.0;
+        let heavy = prediction_change(&records, &pixels, &photos, &one);
+        assert!(heavy > 1.5 * light, "{light} {heavy}");
     }
 }
