@@ -26,10 +26,15 @@ fn assert_recovered(fit: &serde_json::Value, truth: &serde_json::Value, rel: f64
 /// empty memory, so it ends the search. `copper-flash` is noise-free and the projection starts
 /// at its optimum, so the first round lowers nothing (to the `f32` lanes' rounding) and is the
 /// last; before, a second round repeated its failed line search (122 evaluations against 82).
+/// (`single`'s default, Levenberg-Marquardt, settles there without a step.)
 #[test]
 fn a_round_that_lowers_nothing_ends_the_search() {
     let dir = tempfile::tempdir().unwrap();
-    let fit = fit_json(&repo("datasets/copper-flash"), &[], dir.path());
+    let fit = fit_json(
+        &repo("datasets/copper-flash"),
+        &["--optimizer", "lbfgs"],
+        dir.path(),
+    );
     let termination = fit["termination"].as_str().unwrap();
     assert!(termination.ends_with("(round 1)"), "{termination}");
     let truth = read_json(&repo("datasets/copper-flash/material.json"));
@@ -41,8 +46,17 @@ fn variable_projection_starts_at_the_joint_optimum() {
     let dir = tempfile::tempdir().unwrap();
     let set = repo("datasets/aluminium-pinhole");
     let truth = read_json(&repo("datasets/aluminium-pinhole/material.json"));
-    let projected = fit_json(&set, &[], dir.path());
-    let joint = fit_json(&set, &["--no-projection"], dir.path());
+    // In `f64` lanes: the `f32` lanes' rounding moves the loss by about 3e-6 of itself from
+    // point to point near the optimum, more than the comparison below allows (Levenberg-
+    // Marquardt's joint search found an `f32` loss 2.6e-6 below the projected fit's; in `f64`
+    // the two agree to 1e-10).
+    let f64_lanes = ["--batch-precision", "f64"];
+    let projected = fit_json(&set, &f64_lanes, dir.path());
+    let joint = fit_json(
+        &set,
+        &["--no-projection", "--batch-precision", "f64"],
+        dir.path(),
+    );
     assert_eq!(projected["start_method"], "projection");
     assert_eq!(joint["start_method"], "scan");
     // Same optimum (Schlick on conductor photos: a model mismatch, so not the truth exactly).
@@ -131,7 +145,12 @@ fn swarm_multistart_and_pyramid_find_the_same_answer() {
     let multi = fit_json(&set, &["--starts", "3", "--seed", "5"], dir.path());
     let starts = multi["starts"].as_array().unwrap();
     assert_eq!(starts.len(), 3);
-    assert_eq!(starts[1]["method"], "random");
+    let mut methods: Vec<&str> = starts
+        .iter()
+        .map(|s| s["method"].as_str().unwrap())
+        .collect();
+    methods.sort();
+    assert_eq!(methods, ["projection", "random", "random"]);
     // Best first, and the file reports the best.
     let losses: Vec<f64> = starts.iter().map(|s| s["loss"].as_f64().unwrap()).collect();
     assert!(losses.windows(2).all(|w| w[0] <= w[1]), "{losses:?}");

@@ -52,7 +52,9 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum Optimizer {
-    /// Per model: L-BFGS for every model but `heitz`, Nelder-Mead for `heitz`.
+    /// Per model: Levenberg-Marquardt where the objective has a Gauss-Newton matrix
+    /// ([`objective::Objective::has_gauss_newton`]), Nelder-Mead for `heitz`,
+    /// L-BFGS otherwise.
     #[default]
     Auto,
     NelderMead,
@@ -365,7 +367,14 @@ fn fit_level_on(
     let recorder = Recorder::new(
         progress.then(|| Progress::new(&format!("fit {}", space.model), options.max_iters)),
     );
-    let local = options.optimizer.local(space.model);
+    let local = match options.optimizer.local(space.model) {
+        LocalOptimizer::Lbfgs
+            if options.optimizer == Optimizer::Auto && objective.has_gauss_newton() =>
+        {
+            LocalOptimizer::LevenbergMarquardt
+        }
+        local => local,
+    };
     let mut iterations = 0;
     let mut results = Vec::new();
     for (x, method) in starts {
@@ -430,7 +439,7 @@ fn fit_level_on(
         loss,
         loss_kind: options.loss,
         optimizer: options.optimizer,
-        gradient: (local == LocalOptimizer::Lbfgs).then(|| objective.gradient_method()),
+        gradient: (local != LocalOptimizer::NelderMead).then(|| objective.gradient_method()),
         iterations,
         evaluations,
         termination,

@@ -648,30 +648,47 @@ impl<'a> Objective<'a> {
     /// model or the dimension has no dual path. The one match over the dimension picks the
     /// width of the dual numbers.
     pub fn exact_cost_and_gradient(&self, x: &[f64]) -> Option<(f64, Vec<f64>)> {
+        let (cost, gradient, _) = self.exact_pass(x, false)?;
+        Some((cost, gradient))
+    }
+
+    /// Normalised cost, its gradient and, when `matrix`, its Gauss-Newton matrix (see
+    /// [`Objective::gauss_newton`]) at `x`, from the batch kernel's pass with tangents where it
+    /// renders the whole prediction and from the dual-number pass otherwise.
+    fn exact_pass(&self, x: &[f64], matrix: bool) -> Option<(f64, Vec<f64>, Option<Vec<f64>>)> {
         let single_only = self.batch_lobe(&self.space.surface(x).single).is_some();
-        let (loss, gradient) = match x.len() {
-            _ if single_only => Some(self.batch_pass(x)),
-            1 => self.dual_pass::<1>(x),
-            2 => self.dual_pass::<2>(x),
-            3 => self.dual_pass::<3>(x),
-            4 => self.dual_pass::<4>(x),
-            5 => self.dual_pass::<5>(x),
-            6 => self.dual_pass::<6>(x),
-            7 => self.dual_pass::<7>(x),
-            8 => self.dual_pass::<8>(x),
-            9 => self.dual_pass::<9>(x),
-            10 => self.dual_pass::<10>(x),
-            11 => self.dual_pass::<11>(x),
+        let (loss, gradient, gauss_newton) = match x.len() {
+            _ if single_only => Some(self.batch_pass(x, matrix)),
+            1 => self.dual_pass::<1>(x, matrix),
+            2 => self.dual_pass::<2>(x, matrix),
+            3 => self.dual_pass::<3>(x, matrix),
+            4 => self.dual_pass::<4>(x, matrix),
+            5 => self.dual_pass::<5>(x, matrix),
+            6 => self.dual_pass::<6>(x, matrix),
+            7 => self.dual_pass::<7>(x, matrix),
+            8 => self.dual_pass::<8>(x, matrix),
+            9 => self.dual_pass::<9>(x, matrix),
+            10 => self.dual_pass::<10>(x, matrix),
+            11 => self.dual_pass::<11>(x, matrix),
             _ => None,
         }?;
         let cost = self.record(x, loss / self.scale);
-        Some((cost, gradient.iter().map(|g| g / self.scale).collect()))
+        let normalise = |v: Vec<f64>| v.into_iter().map(|g| g / self.scale).collect::<Vec<_>>();
+        Some((cost, normalise(gradient), gauss_newton.map(normalise)))
     }
 
     /// Loss and its gradient at `x` with `N` = `x.len()` dual directions: the coordinates are
     /// seeded with unit derivative vectors, the renderer carries them to every pixel, and the
     /// chain rule sums `d loss / d p . d p / d x` over pixels and channels.
-    fn dual_pass<const N: usize>(&self, x: &[f64]) -> Option<(f64, Vec<f64>)> {
+    ///
+    /// With `matrix` (a deterministic model and a squared-error loss), also the Gauss-Newton
+    /// matrix from each pixel's Jacobian row: the kernel's tangents through the coordinates,
+    /// the dual parts of the anchors it interpolates, or its own dual parts.
+    fn dual_pass<const N: usize>(
+        &self,
+        x: &[f64],
+        matrix: bool,
+    ) -> Option<(f64, Vec<f64>, Option<Vec<f64>>)> {
         let coords: Vec<DualSVec64<N>> = x
             .iter()
             .enumerate()
@@ -733,7 +750,43 @@ impl<'a> Objective<'a> {
                     .collect();
                 add_dual_slopes::<N>(&mut gradient, &[exact], &[exact_slopes]);
             }
-            return Some((value, gradient));
+            let gauss_newton = (matrix && parts.len() == 1).then(|| {
+                let part = &parts[0];
+                let directions = self.coordinate_directions(x);
+                let multi: Vec<[[f64; N]; 3]> =
+                    part.multi.iter().map(|m| m.0.map(dual_parts)).collect();
+                let mut exact: Vec<Option<[[f64; N]; 3]>> = vec![None; raws[0].len()];
+                for (k, value) in &part.exact {
+                    exact[*k] = Some(value.map(dual_parts));
+                }
+                let e = at.exposure;
+                self.gauss_newton_sum::<N>(|k, c, row| {
+                    let t = &tangents;
+                    for (i, d) in directions.iter().enumerate() {
+                        let d = &d[c];
+                        row[i] = e
+                            * (t.ax[k][c] * d[0]
+                                + t.ay[k][c] * d[1]
+                                + t.fresnel_a[k][c] * d[2]
+                                + t.fresnel_b[k][c] * d[3]
+                                + t.diffuse[k][c] * d[4])
+                            + raws[0][k][c] * d[5];
+                    }
+                    if let Some(corners) = &anchors.corners[k] {
+                        for &(a, w) in corners {
+                            let s = e * PI * lambert[k][c] * w;
+                            for (r, m) in row.iter_mut().zip(&multi[a as usize][c]) {
+                                *r += s * m;
+                            }
+                        }
+                    } else if let Some(own) = &exact[k] {
+                        for (r, m) in row.iter_mut().zip(&own[c]) {
+                            *r += e * m;
+                        }
+                    }
+                })
+            });
+            return Some((value, gradient, gauss_newton));
         }
         let renders: Vec<Vec<[DualSVec64<N>; 3]>> = render_planned_streams(
             brdf.as_ref(),
@@ -755,23 +808,75 @@ impl<'a> Objective<'a> {
         let (value, slopes) = (loss.renders_value(&values), loss.renders_gradient(&values));
         let mut gradient = vec![0.0; N];
         add_dual_slopes::<N>(&mut gradient, &renders, &slopes);
-        Some((value, gradient))
+        let gauss_newton = (matrix && renders.len() == 1)
+            .then(|| self.gauss_newton_sum::<N>(|k, c, row| *row = dual_parts(renders[0][k][c])));
+        Some((value, gradient, gauss_newton))
+    }
+
+    /// `2 sum_k,c v_kc J_kc J_kc^T` (row-major `N x N`) over the loss pixels `k` and channels
+    /// `c`, with the loss's weights `v` ([`Loss::quadratic_weights`]) and the Jacobian rows
+    /// `J_kc` that `row` writes. Summed in fixed chunks of pixels, in order, so the sum does
+    /// not depend on the thread count.
+    fn gauss_newton_sum<const N: usize>(
+        &self,
+        row: impl Fn(usize, usize, &mut [f64; N]) + Sync,
+    ) -> Vec<f64> {
+        const CHUNK: usize = 4096;
+        let weights = self
+            .image_loss()
+            .quadratic_weights()
+            .expect("a squared-error loss");
+        let chunks: Vec<[[f64; N]; N]> = weights
+            .par_chunks(CHUNK)
+            .enumerate()
+            .map(|(chunk, weights)| {
+                let mut sum = [[0.0; N]; N];
+                let mut r = [0.0; N];
+                for (offset, v) in weights.iter().enumerate() {
+                    for (c, &v) in v.iter().enumerate() {
+                        row(chunk * CHUNK + offset, c, &mut r);
+                        for i in 0..N {
+                            for j in 0..=i {
+                                sum[i][j] += v * r[i] * r[j];
+                            }
+                        }
+                    }
+                }
+                sum
+            })
+            .collect();
+        let mut matrix = vec![0.0; N * N];
+        for sum in &chunks {
+            for i in 0..N {
+                for j in 0..=i {
+                    matrix[i * N + j] += 2.0 * sum[i][j];
+                }
+            }
+        }
+        for i in 0..N {
+            for j in 0..i {
+                matrix[j * N + i] = matrix[i * N + j];
+            }
+        }
+        matrix
     }
 
     /// Loss and its gradient at `x` where the render is the single-bounce and diffuse terms
     /// only: the batch kernel gives each pixel's derivatives by the kernel's parameters in the
     /// render's own pass, the loss's slopes weight them, and one dual number per coordinate
     /// carries the parameters' derivatives by the coordinates (`ParamSpace::surface`).
-    fn batch_pass(&self, x: &[f64]) -> (f64, Vec<f64>) {
+    ///
+    /// With `matrix`, also the Gauss-Newton matrix: per channel the Gram matrix of the pixels'
+    /// tangents by the kernel's parameters (the exposure's tangent is the unexposed value),
+    /// weighted by the loss, carried to the coordinates by the parameters' derivatives.
+    fn batch_pass(&self, x: &[f64], matrix: bool) -> (f64, Vec<f64>, Option<Vec<f64>>) {
         let surface = self.space.surface(x);
         let lobe = self
             .batch_lobe(&surface.single)
             .expect("called where the kernel serves");
         let (raw, tangents) = self.batch().render_with_tangents(lobe, surface.diffuse);
-        let render: Vec<[f64; 3]> = raw
-            .iter()
-            .map(|p| p.map(|v| v * surface.exposure))
-            .collect();
+        let e = surface.exposure;
+        let render: Vec<[f64; 3]> = raw.iter().map(|p| p.map(|v| v * e)).collect();
         let renders = vec![render; self.seeds.len()];
         let loss = self.image_loss();
         let (value, slopes) = (
@@ -779,8 +884,49 @@ impl<'a> Objective<'a> {
             loss.renders_gradient(&renders),
         );
         let raws = vec![raw.as_slice(); slopes.len()];
-        let gradient = self.batch_gradient(x, &slopes, &raws, &tangents, surface.exposure);
-        (value, gradient)
+        let gradient = self.batch_gradient(x, &slopes, &raws, &tangents, e);
+        let weights = loss.quadratic_weights().filter(|_| matrix);
+        let gauss_newton = weights.map(|weights| {
+            let mut gram = [[[0.0; 6]; 6]; 3];
+            for (k, v) in weights.iter().enumerate() {
+                for c in 0..3 {
+                    let u = [
+                        e * tangents.ax[k][c],
+                        e * tangents.ay[k][c],
+                        e * tangents.fresnel_a[k][c],
+                        e * tangents.fresnel_b[k][c],
+                        e * tangents.diffuse[k][c],
+                        raw[k][c],
+                    ];
+                    for a in 0..6 {
+                        for b in 0..=a {
+                            gram[c][a][b] += v[c] * u[a] * u[b];
+                        }
+                    }
+                }
+            }
+            let directions = self.coordinate_directions(x);
+            let n = x.len();
+            let mut matrix = vec![0.0; n * n];
+            for i in 0..n {
+                for j in 0..=i {
+                    let mut sum = 0.0;
+                    for (c, gram) in gram.iter().enumerate() {
+                        let (di, dj) = (directions[i][c], directions[j][c]);
+                        for a in 0..6 {
+                            for b in 0..6 {
+                                let g = if b <= a { gram[a][b] } else { gram[b][a] };
+                                sum += di[a] * g * dj[b];
+                            }
+                        }
+                    }
+                    matrix[i * n + j] = 2.0 * sum;
+                    matrix[j * n + i] = matrix[i * n + j];
+                }
+            }
+            matrix
+        });
+        (value, gradient, gauss_newton)
     }
 
     /// The gradient by the coordinates `x` of a loss with slopes `slopes` (one per render of
@@ -810,6 +956,14 @@ impl<'a> Objective<'a> {
                 }
             }
         }
+        self.coordinate_surfaces(x)
+            .iter()
+            .map(|surface| by.along(surface))
+            .collect()
+    }
+
+    /// The surface at `x` once per coordinate, with that coordinate's unit derivative.
+    fn coordinate_surfaces(&self, x: &[f64]) -> Vec<Surface<Dual64>> {
         (0..x.len())
             .map(|i| {
                 let coords: Vec<Dual64> = x
@@ -824,9 +978,43 @@ impl<'a> Objective<'a> {
                         }
                     })
                     .collect();
-                by.along(&self.space.surface(&coords))
+                self.space.surface(&coords)
             })
             .collect()
+    }
+
+    /// [`kernel_directions`] of each coordinate at `x`.
+    fn coordinate_directions(&self, x: &[f64]) -> Vec<[[f64; 6]; 3]> {
+        self.coordinate_surfaces(x)
+            .iter()
+            .map(kernel_directions)
+            .collect()
+    }
+
+    /// Whether [`Objective::gauss_newton`] serves this objective: a deterministic model with
+    /// exact derivatives (the batch kernel's tangents or dual numbers: every analytic model
+    /// and `tabulated`), a squared-error loss, and at most [`MAX_EXACT_DIM`] coordinates.
+    pub fn has_gauss_newton(&self) -> bool {
+        let surface = self.space.surface(&vec![0.0; self.space.dim()]).single;
+        !self.stochastic
+            && self.gradient == GradientMethod::Exact
+            && matches!(self.kind, LossKind::L2 | LossKind::RelativeL2)
+            && self.space.dim() <= MAX_EXACT_DIM
+            && differentiable(self.space.model, surface, BounceCap::NONE).is_some()
+    }
+
+    /// The normalised cost at `x`, its gradient and its Gauss-Newton matrix `2 J^T V J`
+    /// (row-major, `dim x dim`), where `J` is the prediction's Jacobian by the coordinates
+    /// and `V` the loss's weights ([`Loss::quadratic_weights`]): the cost's Hessian less the
+    /// residuals' curvature terms (Nocedal & Wright 2006, eq. 10.24), from the same pass as
+    /// the cost and the gradient ([`Objective::exact_pass`]). `None` where
+    /// [`Objective::has_gauss_newton`] does not hold.
+    pub fn gauss_newton(&self, x: &[f64]) -> Option<(f64, Vec<f64>, Vec<f64>)> {
+        if !self.has_gauss_newton() {
+            return None;
+        }
+        let (cost, gradient, matrix) = self.exact_pass(x, true)?;
+        Some((cost, gradient, matrix?))
     }
 
     /// Undo the normalisation of a cost reported by the optimiser.
@@ -920,6 +1108,15 @@ struct AnchoredPart<T> {
     own: Vec<[f64; 3]>,
 }
 
+/// The derivative part of a dual number as an array (zero where it has none).
+fn dual_parts<const N: usize>(v: DualSVec64<N>) -> [f64; N] {
+    let mut parts = [0.0; N];
+    if let Some(d) = &v.eps.0 {
+        parts.copy_from_slice(d.as_slice());
+    }
+    parts
+}
+
 /// `gradient += sum over renders, pixels and channels of slope * d render / d x`, the
 /// derivatives being the dual parts of `renders`.
 fn add_dual_slopes<const N: usize>(
@@ -957,21 +1154,36 @@ impl KernelSlopes {
     /// The loss's derivative along the direction whose effect on the parameters is the
     /// derivative part of `surface`.
     fn along(&self, surface: &Surface<Dual64>) -> f64 {
-        use crate::microfacet::Fresnel;
-        let mf = &surface.single.microfacet;
-        let mut sum = self.ax * mf.ax.eps + self.ay * mf.ay.eps;
-        let (a, b) = match surface.single.fresnel {
-            Fresnel::Schlick { f0 } => (f0.0.map(|v| v.eps), [0.0; 3]),
-            Fresnel::Conductor { eta, k } => (eta.0.map(|v| v.eps), k.0.map(|v| v.eps)),
-            Fresnel::White | Fresnel::Dielectric { .. } => ([0.0; 3], [0.0; 3]),
-        };
-        for c in 0..3 {
-            sum += self.fresnel_a[c] * a[c]
-                + self.fresnel_b[c] * b[c]
-                + self.diffuse[c] * surface.diffuse[c].eps;
+        let d = kernel_directions(surface);
+        let mut sum = self.ax * d[0][0] + self.ay * d[0][1] + self.exposure * d[0][5];
+        for (c, d) in d.iter().enumerate() {
+            sum += self.fresnel_a[c] * d[2] + self.fresnel_b[c] * d[3] + self.diffuse[c] * d[4];
         }
-        sum + self.exposure * surface.exposure.eps
+        sum
     }
+}
+
+/// Per channel, the derivative parts of the batch kernel's parameters that act on it, in
+/// the order of [`PixelTangents`]: `[ax, ay, fresnel_a_c, fresnel_b_c, diffuse_c, exposure]`
+/// (the roughness and the exposure are the same in every channel).
+fn kernel_directions(surface: &Surface<Dual64>) -> [[f64; 6]; 3] {
+    use crate::microfacet::Fresnel;
+    let mf = &surface.single.microfacet;
+    let (a, b) = match surface.single.fresnel {
+        Fresnel::Schlick { f0 } => (f0.0.map(|v| v.eps), [0.0; 3]),
+        Fresnel::Conductor { eta, k } => (eta.0.map(|v| v.eps), k.0.map(|v| v.eps)),
+        Fresnel::White | Fresnel::Dielectric { .. } => ([0.0; 3], [0.0; 3]),
+    };
+    [0, 1, 2].map(|c| {
+        [
+            mf.ax.eps,
+            mf.ay.eps,
+            a[c],
+            b[c],
+            surface.diffuse[c].eps,
+            surface.exposure.eps,
+        ]
+    })
 }
 
 impl CostFunction for &Objective<'_> {

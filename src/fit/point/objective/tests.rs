@@ -433,3 +433,124 @@ fn batch_split_renders_equal_the_generic_render_path() {
         }
     }
 }
+
+/// Where the prediction meets the photos the residuals' curvature terms vanish, so the
+/// Gauss-Newton matrix is the cost's Hessian: against central differences of the exact
+/// gradient (step 1e-4, truncation about 1e-8 of the Hessian) at the truth of synthetic
+/// photos, for every model the batch kernel serves and `tabulated` (dual numbers through the
+/// render plan's anchors), both losses of squared errors, GGX and
+/// Beckmann, a Schlick space with diffuse, a conductor space, and an anisotropic space with a
+/// known Fresnel and a fitted exposure (every kernel parameter and the exposure's tangent).
+/// Measured: within 2e-7 of the largest entry. Away from the truth the two differ by the
+/// residuals' terms, and the gradient is the exact path's.
+#[test]
+fn gauss_newton_matrix_is_the_hessian_at_a_perfect_fit() {
+    let mut rng = crate::bsdf::Rng::seed_from_u64(23);
+    let known = crate::material::FresnelSpec::Schlick {
+        f0: [0.9, 0.6, 0.5],
+    };
+    for model in [
+        Model::Single,
+        Model::Turquin,
+        Model::KullaConty,
+        Model::FastMsx,
+        Model::Tabulated,
+    ] {
+        for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
+            for space in [
+                ParamSpace {
+                    diffuse: true,
+                    ..ParamSpace::plain(model)
+                },
+                ParamSpace {
+                    fresnel: FresnelFamily::Conductor,
+                    ..ParamSpace::plain(model)
+                },
+                ParamSpace {
+                    anisotropic: true,
+                    known_fresnel: Some(known),
+                    exposure: true,
+                    ..ParamSpace::plain(model)
+                },
+            ] {
+                let space = ParamSpace { ndf, ..space };
+                let mut x = random_point(&space, &mut rng);
+                if space.exposure {
+                    // The photos are rendered at exposure 1 (the material has none).
+                    *x.last_mut().expect("the exposure's coordinate") = 0.0;
+                }
+                let records = synthetic_records(&space.material(&x));
+                for kind in [LossKind::L2, LossKind::RelativeL2] {
+                    let objective =
+                        Objective::new(space, &records, kind, 3).with_precision(Precision::F64);
+                    assert!(objective.has_gauss_newton());
+                    let (cost, gradient, matrix) = objective.gauss_newton(&x).expect("served");
+                    let (exact_cost, exact_gradient) =
+                        objective.exact_cost_and_gradient(&x).expect("exact");
+                    assert_eq!((cost, &gradient), (exact_cost, &exact_gradient));
+                    let what = format!("{model} {ndf:?} {kind:?} {space:?}");
+                    assert_gauss_newton_is_the_hessian(&objective, &x, &matrix, &what);
+                }
+            }
+        }
+    }
+}
+
+/// Central differences of the exact gradient at `x` (step 1e-4) equal `matrix` within 1e-5 of
+/// its largest entry.
+fn assert_gauss_newton_is_the_hessian(
+    objective: &Objective,
+    x: &[f64],
+    matrix: &[f64],
+    what: &str,
+) {
+    let x = x.to_vec();
+    let n = x.len();
+    let h = 1e-4;
+    let mut hessian = vec![0.0; n * n];
+    for j in 0..n {
+        let mut probe = x.clone();
+        probe[j] = x[j] + h;
+        let plus = objective.exact_cost_and_gradient(&probe).unwrap().1;
+        probe[j] = x[j] - h;
+        let minus = objective.exact_cost_and_gradient(&probe).unwrap().1;
+        for i in 0..n {
+            hessian[i * n + j] = (plus[i] - minus[i]) / (2.0 * h);
+        }
+    }
+    let largest = hessian.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let worst = hessian
+        .iter()
+        .zip(matrix)
+        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+    assert!(
+        worst <= 1e-5 * largest,
+        "{what}: Gauss-Newton {matrix:?} against \
+         Hessian {hessian:?}"
+    );
+}
+
+/// The same through the render plan's anchors: `tabulated` on 48x48 pinhole photos of a
+/// conductor, which the plan renders through anchors, with photos equal to the objective's
+/// own prediction at the point (the anchors' interpolation is then part of the truth).
+#[test]
+fn gauss_newton_matrix_through_anchors_is_the_hessian_at_a_perfect_fit() {
+    let space = ParamSpace {
+        fresnel: FresnelFamily::Conductor,
+        ..ParamSpace::plain(Model::Tabulated)
+    };
+    let x = [0.6f64.ln(), 2.0, 1.5, 1.0, 0.5, 0.2, -0.5];
+    let mut records = pinhole_records(&space.material(&x));
+    let objective = Objective::new(space, &records, LossKind::L2, 3).with_precision(Precision::F64);
+    let summary = objective.plan_summary(&space.material(&x));
+    assert!(summary.anchors > 0, "{summary:?}");
+    let predicted = objective.predict(&x);
+    let pixels = objective.pixels().to_vec();
+    for (&p, value) in pixels.iter().zip(predicted) {
+        records.target[p] = value;
+    }
+    let objective = Objective::new(space, &records, LossKind::L2, 3).with_precision(Precision::F64);
+    let (cost, _, matrix) = objective.gauss_newton(&x).expect("served");
+    assert!(cost < 1e-20, "cost {cost:e}");
+    assert_gauss_newton_is_the_hessian(&objective, &x, &matrix, "tabulated through anchors");
+}
