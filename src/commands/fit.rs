@@ -455,7 +455,15 @@ pub fn fit_and_sample(
     for &model in models.iter().skip(fits.len()) {
         let fit = fit_model(records, &options.fit_options(model, !quiet))?;
         if !quiet {
-            eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
+            // A corrected stochastic fit also says how far its walks' noise leaves alpha.
+            let noise = fit
+                .correction
+                .as_ref()
+                .and_then(|c| c.alpha_noise)
+                .map_or(String::new(), |n| {
+                    format!(" (walks' noise {:.2}%)", 100.0 * n[0].max(n[1]))
+                });
+            eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}{}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], noise, fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
         }
         fits.push(fit);
     }

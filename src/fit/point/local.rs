@@ -427,13 +427,20 @@ const LM_RIDGE: f64 = 1e-9;
 /// and a gradient that vanishes with it, whose ratio would predict a gain no move can
 /// reach. `None` where even the ridged matrix is not positive definite.
 fn predicted_decrease(matrix: &[f64], gradient: &[f64], n: usize) -> Option<f64> {
+    let step = ridged_gauss_newton(matrix, n)?.solve(gradient);
+    Some(0.5 * step.iter().zip(gradient).map(|(s, g)| s * g).sum::<f64>())
+}
+
+/// The Cholesky factor of the `n x n` Gauss-Newton `matrix` with a ridge of [`LM_RIDGE`] of its
+/// largest diagonal (see [`predicted_decrease`]), `None` where even that is not positive
+/// definite.
+pub(super) fn ridged_gauss_newton(matrix: &[f64], n: usize) -> Option<Cholesky> {
     let largest = (0..n).map(|a| matrix[a * n + a]).fold(0.0, f64::max);
     let mut ridged = matrix.to_vec();
     for a in 0..n {
         ridged[a * n + a] += LM_RIDGE * largest;
     }
-    let step = Cholesky::new(&ridged, n)?.solve(gradient);
-    Some(0.5 * step.iter().zip(gradient).map(|(s, g)| s * g).sum::<f64>())
+    Cholesky::new(&ridged, n)
 }
 
 fn levenberg_marquardt(
