@@ -175,6 +175,13 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
 
     let mut verdicts = Report::verdicts(&selection, held_out_ranking.as_ref(), &rows);
     verdicts.extend(region_lines);
+    // What a fit may have got wrong (another basin as good, a bound) stands in the verdicts.
+    verdicts.extend(fits.iter().flat_map(|fit| {
+        let model = fit.material.model;
+        fit.warnings
+            .iter()
+            .map(move |w| format!("{model}: warning: {w}"))
+    }));
     let report = Report {
         capture: args.capture.display().to_string(),
         capture_name: capture.name.clone(),

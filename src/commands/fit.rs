@@ -467,6 +467,20 @@ pub fn fit_and_sample(
         }
         fits.push(fit);
     }
+    if posterior.is_some() {
+        // The chains explore the MAP's basin: say so where another basin is as good.
+        for fit in &mut fits {
+            if let Some(other) = fit.alternatives.first() {
+                let warning = format!(
+                    "--mcmc: the chains start in the basin of alpha {:.4} and the intervals \
+                     describe that basin only; the posterior has another mode near alpha {:.4} \
+                     (loss x{:.4})",
+                    fit.material.alpha[0], other.alpha[0], other.loss_ratio
+                );
+                fit.warnings.push(warning);
+            }
+        }
+    }
     Ok(Some(Fits {
         fits,
         posterior,
@@ -648,6 +662,12 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         return Ok(());
     };
     let (fits, posterior) = (&done.fits, &done.posterior);
+    // Whatever a fit may have got wrong is said even with --quiet.
+    for fit in fits {
+        for warning in &fit.warnings {
+            eprintln!("warning: {}: {warning}", fit.material.model);
+        }
+    }
     let measured = measure_fits(&records, fits, &args.options);
     let selection = select(&records, fits, &measured, &args.options);
     if !args.quiet && fits.len() > 1 {

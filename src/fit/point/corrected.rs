@@ -179,6 +179,8 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
     let first = fit_point_on(&objective, records, &surrogate)?;
     let mut evaluations = first.fit.evaluations;
     let mut alpha_rounds = vec![first.fit.material.alpha];
+    // The basins the surrogate's start compared: the rounds start from its optimum only.
+    let (alternatives, warnings) = (first.fit.alternatives.clone(), first.fit.warnings.clone());
     let (mut fit, mut x) = (first.fit, first.x);
     let mut corrected = records.target.clone();
     let mut settled = false;
@@ -235,6 +237,12 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
         alpha_noise,
     });
     fit.exposure = super::exposure::estimate(options.space, &x);
+    fit.alternatives = alternatives;
+    for warning in warnings {
+        if !fit.warnings.contains(&warning) {
+            fit.warnings.push(warning);
+        }
+    }
     fit.seconds = started.elapsed().as_secs_f64();
     Ok(PointFit { fit, x })
 }

@@ -41,7 +41,7 @@ use exposure::{exposed_records, ExposureEstimate};
 pub use local::TracePoint;
 use local::{LocalOptimizer, Recorder};
 use objective::{render_seeds, GradientMethod, Objective};
-use params::ParamSpace;
+use params::{ParamSpace, ALPHA_BOUNDS, EXPOSURE_BOUNDS};
 use projection::Projection;
 use serde::{Deserialize, Serialize};
 pub use start::StartMethod;
@@ -191,6 +191,18 @@ pub struct ModelFit {
     /// The defect correction rounds of a stochastic model's fit ([`corrected`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub correction: Option<corrected::Correction>,
+    /// The start's profile over roughness (`[alpha, loss]` at every node it evaluated,
+    /// [`start::Profile`]): the projected loss, or the scan's squared error, in that method's
+    /// own units. Its basins are where the local searches started.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub profile: Vec<[f64; 2]>,
+    /// Optima of other basins that explain the photos almost as well ([`Alternative`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub alternatives: Vec<Alternative>,
+    /// What the fit may have got wrong: a parameter stopped at its bound, another basin as
+    /// good; printed by `fit` and `compare`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 impl ModelFit {
@@ -338,25 +350,35 @@ fn fit_level_on(
     }
     let argmin_failed = |e: ArgminError| Error::argument("optimizer", e.to_string());
     let mut projected_renders = 0;
-    let (x0, start_method) = match given_start {
-        Some(x) => (x, StartMethod::Coarser),
+    let (global, start_method, profile) = match given_start {
+        Some(x) => (vec![x], StartMethod::Coarser, None),
         None => match (options.optimizer, options.projection) {
             (Optimizer::Pso, _) => (
-                start::swarm_start(screening, options.seed).map_err(argmin_failed)?,
+                vec![start::swarm_start(screening, options.seed).map_err(argmin_failed)?],
                 StartMethod::Pso,
+                None,
             ),
             (_, true) => match Projection::new(screening) {
                 Some(projection) => {
-                    let x = start::projected_start(&projection).map_err(argmin_failed)?;
+                    let (xs, profile) =
+                        start::projected_starts(&projection).map_err(argmin_failed)?;
                     projected_renders = projection.renders();
-                    (x, StartMethod::Projection)
+                    (xs, StartMethod::Projection, Some(profile))
                 }
-                None => (start::scan_point(screening), StartMethod::Scan),
+                None => {
+                    let (xs, profile) = start::scan_starts(screening);
+                    (xs, StartMethod::Scan, Some(profile))
+                }
             },
-            (_, false) => (start::scan_point(screening), StartMethod::Scan),
+            (_, false) => {
+                let (xs, profile) = start::scan_starts(screening);
+                (xs, StartMethod::Scan, Some(profile))
+            }
         },
     };
-    let mut starts = vec![(x0.clone(), start_method)];
+    let x0 = global[0].clone();
+    let mut starts: Vec<(Vec<f64>, StartMethod)> =
+        global.into_iter().map(|x| (x, start_method)).collect();
     if start_method != StartMethod::Coarser {
         starts.extend(
             start::random_points(&space, options.seed, options.starts.saturating_sub(1))
@@ -403,9 +425,27 @@ fn fit_level_on(
     }
     results.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (_, best_x, _, termination) = results[0].clone();
+    let best_x = space.clamp(&best_x);
     let material = space.material(&best_x);
     let photos = photo_losses(objective, records, &best_x);
     let loss = objective.loss(&best_x);
+    let alternatives = alternatives(objective, records, &best_x, loss, &results);
+    let mut warnings: Vec<String> = space
+        .at_bounds(&best_x)
+        .into_iter()
+        .map(|name| {
+            let (what, (lo, hi)) = match name.strip_prefix("ln_") {
+                Some(alpha) if alpha.starts_with("alpha") => (alpha.to_string(), ALPHA_BOUNDS),
+                _ => ("exposure".to_string(), EXPOSURE_BOUNDS),
+            };
+            format!(
+                "{what} stopped at a bound of its range [{lo}, {hi}]: the photos pull it \
+                 further, which the model does not explain (a missing diffuse term, \
+                 wrong light positions or intensities?)"
+            )
+        })
+        .collect();
+    warnings.extend(alternatives.iter().map(Alternative::warning));
     let screened = if std::ptr::eq(screening, objective) {
         0
     } else {
@@ -456,7 +496,103 @@ fn fit_level_on(
             interval: None,
         }),
         correction: None,
+        profile: profile.map_or_else(Vec::new, |p| p.table()),
+        alternatives,
+        warnings,
     })
+}
+
+/// Two optima whose roughness differs by less than this (in `ln alpha`, 5%) are one basin.
+const DISTINCT_LN_ALPHA: f64 = 0.05;
+
+/// An optimum of another basin whose loss is within this factor of the chosen one's is
+/// reported: the photos hardly separate the two (on `heitz` flash photos of gold at alpha 0.8,
+/// basins at 0.81 and 1.20 ended 2% apart).
+pub const AMBIGUOUS_LOSS_RATIO: f64 = 1.05;
+
+/// Photos named as separating two optima.
+const SEPARATING_PHOTOS: usize = 3;
+
+/// A local optimum in another basin than the fit's that explains the photos almost as well
+/// ([`AMBIGUOUS_LOSS_RATIO`]): the fit may have chosen the wrong one, and the photos that
+/// separate them most say which new photo would tell them apart.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Alternative {
+    pub alpha: [f64; 2],
+    pub f0: [f64; 3],
+    pub loss: f64,
+    /// This optimum's loss over the fit's.
+    pub loss_ratio: f64,
+    /// The photos whose losses differ most between the two optima, with this optimum's loss
+    /// over the fit's on each.
+    pub separating_photos: Vec<(String, f64)>,
+}
+
+impl Alternative {
+    /// The line a fit prints and writes to its `warnings`.
+    pub fn warning(&self) -> String {
+        let photos: Vec<String> = self
+            .separating_photos
+            .iter()
+            .map(|(stem, ratio)| format!("{stem} (x{ratio:.2})"))
+            .collect();
+        format!(
+            "another basin explains the photos almost as well: alpha {:.4} with loss x{:.4} of the fit's; \
+             the photos that separate them most are {}; a photo lit near the mirror direction of one \
+             lobe and not the other would tell them apart",
+            self.alpha[0],
+            self.loss_ratio,
+            photos.join(", ")
+        )
+    }
+}
+
+/// The optima of the local searches `results` (cost, coordinates, ...) in other basins than
+/// `best_x` (loss `loss`) within [`AMBIGUOUS_LOSS_RATIO`] of it, one per basin, lowest first.
+fn alternatives(
+    objective: &Objective,
+    records: &ShadingRecords,
+    best_x: &[f64],
+    loss: f64,
+    results: &[(f64, Vec<f64>, StartMethod, String)],
+) -> Vec<Alternative> {
+    let space = objective.space;
+    let ln_alpha = |x: &[f64]| space.clamp(x)[0];
+    let mut seen = vec![ln_alpha(best_x)];
+    let mut found = Vec::new();
+    for (_, x, _, _) in results {
+        let x = space.clamp(x);
+        if seen
+            .iter()
+            .any(|&a| (ln_alpha(&x) - a).abs() < DISTINCT_LN_ALPHA)
+        {
+            continue;
+        }
+        seen.push(ln_alpha(&x));
+        let other = objective.loss(&x);
+        if other > AMBIGUOUS_LOSS_RATIO * loss {
+            continue;
+        }
+        let ours = photo_losses(objective, records, best_x);
+        let theirs = photo_losses(objective, records, &x);
+        let mut ratios: Vec<(String, f64)> = ours
+            .iter()
+            .zip(&theirs)
+            .filter(|(a, _)| a.loss > 0.0)
+            .map(|(a, b)| (a.image.clone(), b.loss / a.loss))
+            .collect();
+        ratios.sort_by(|a, b| b.1.ln().abs().total_cmp(&a.1.ln().abs()));
+        ratios.truncate(SEPARATING_PHOTOS);
+        let material = space.material(&x);
+        found.push(Alternative {
+            alpha: material.alpha,
+            f0: material.fresnel.f0(),
+            loss: other,
+            loss_ratio: other / loss,
+            separating_photos: ratios,
+        });
+    }
+    found
 }
 
 /// The objective `options` minimise over `records`.
@@ -547,4 +683,79 @@ pub fn edge_tint(material: &Material) -> Option<[f64; 3]> {
 /// The model names a fit file may list as candidates.
 pub fn model_names(models: &[Model]) -> Vec<&'static str> {
     models.iter().map(|m| m.name()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::point::objective::tests::pinhole_records;
+    use crate::microfacet::{Height, NdfKind};
+
+    fn material(alpha: [f64; 2], f0: [f64; 3]) -> Material {
+        Material {
+            model: Model::Single,
+            ndf: NdfKind::Ggx,
+            height: Height::Correlated,
+            alpha,
+            fresnel: FresnelSpec::Schlick { f0 },
+            diffuse: [0.0; 3],
+        }
+    }
+
+    /// Photos of a `single` surface rougher than any fit may return (alpha 6): every
+    /// optimiser presses the roughness outward, and every one stops on the bound 3 and says
+    /// so. Before the box, Levenberg-Marquardt returned the photos' 6.
+    #[test]
+    fn a_search_that_presses_past_the_roughness_bound_stops_on_it_and_says_so() {
+        let truth = material([6.0; 2], [0.9, 0.7, 0.5]);
+        let records = pinhole_records(&truth);
+        for optimizer in [Optimizer::Auto, Optimizer::Lbfgs, Optimizer::NelderMead] {
+            let options = FitOptions {
+                optimizer,
+                ..FitOptions::defaults(ParamSpace::plain(Model::Single))
+            };
+            let fit = fit_point(&records, &options).unwrap().fit;
+            for a in fit.material.alpha {
+                assert!(
+                    a <= ALPHA_BOUNDS.1 && a > ALPHA_BOUNDS.1 * (1.0 - 1e-6),
+                    "{optimizer:?}: {a}"
+                );
+            }
+            assert!(
+                fit.warnings
+                    .iter()
+                    .any(|w| w.contains("alpha stopped at a bound")),
+                "{optimizer:?}: {:?}",
+                fit.warnings
+            );
+        }
+    }
+
+    /// Outside the box the objective is the loss at the projection plus the pull back, with
+    /// the pull's gradient and Gauss-Newton term in the coordinates that left the box.
+    #[test]
+    fn outside_the_box_the_objective_is_the_projection_plus_the_pull() {
+        let truth = material([0.4; 2], [0.9, 0.7, 0.5]);
+        let records = pinhole_records(&truth);
+        let space = ParamSpace::plain(Model::Single);
+        let objective = objective_of(&records, &FitOptions::defaults(space));
+        let inside = vec![ALPHA_BOUNDS.1.ln(), 0.3, 0.2, 0.1];
+        let outside = vec![ALPHA_BOUNDS.1.ln() + 0.7, 0.3, 0.2, 0.1];
+        let (c_in, g_in, m_in) = objective.gauss_newton(&inside).unwrap();
+        let (c_out, g_out, m_out) = objective.gauss_newton(&outside).unwrap();
+        assert!((c_out - (c_in + 0.49)).abs() < 1e-12 * c_out.max(1.0));
+        assert!((g_out[0] - 1.4).abs() < 1e-12);
+        assert_eq!(&g_out[1..], &g_in[1..]);
+        let n = 4;
+        assert_eq!(m_out[0], 2.0);
+        for j in 1..n {
+            assert_eq!((m_out[j], m_out[j * n]), (0.0, 0.0));
+            for i in 1..n {
+                assert_eq!(m_out[i * n + j], m_in[i * n + j]);
+            }
+        }
+        assert_eq!(space.material(&outside).alpha, [ALPHA_BOUNDS.1; 2]);
+        assert_eq!(space.at_bounds(&outside), vec!["ln_alpha".to_string()]);
+        assert!(space.at_bounds(&[0.0, 0.3, 0.2, 0.1]).is_empty());
+    }
 }

@@ -48,6 +48,13 @@ const MAX_EXACT_DIM: usize = 11;
 /// ([`crate::albedo::rng_stream`]) are then independent of the first render's.
 const SECOND_RENDER_STREAMS: u64 = 0xD1B5_4A32_D192_ED03;
 
+/// Weight of the pull back of a point outside the space's box, in normalised cost units per
+/// squared coordinate ([`crate::fit::point::params`]). Outside the box the loss is constant
+/// along the coordinates that left it (it is evaluated at the projection), so the pull puts
+/// the minimum of a search that presses outward exactly on the bound, whatever its weight;
+/// the weight only sets how firmly a solver's next step is turned back.
+const OUTSIDE_PULL: f64 = 1.0;
+
 /// Seeds of the renders a loss compares: `[seed]` for a deterministic model, two independent
 /// stream sets for a stochastic one (see [`Loss::pair_value`]).
 pub fn render_seeds(stochastic: bool, seed: u64) -> Vec<u64> {
@@ -629,8 +636,21 @@ impl<'a> Objective<'a> {
             .collect()
     }
 
+    /// The normalised cost at `x`: the loss at `x` projected onto the space's box, plus the
+    /// pull back [`OUTSIDE_PULL`] `|x - clamp(x)|^2` ([`crate::fit::point::params`]).
     fn normalised_cost(&self, x: &[f64]) -> f64 {
-        self.record(x, self.loss(x) / self.scale)
+        let pull = self.pull(x);
+        let inside = if pull > 0.0 {
+            self.space.clamp(x)
+        } else {
+            x.to_vec()
+        };
+        self.record(x, self.loss(&inside) / self.scale + pull)
+    }
+
+    /// The pull back of a point outside the box, in normalised cost units.
+    fn pull(&self, x: &[f64]) -> f64 {
+        OUTSIDE_PULL * self.space.outside(x).iter().map(|d| d * d).sum::<f64>()
     }
 
     /// Count an evaluation of the normalised `cost` at `x` and keep the best point.
@@ -655,7 +675,41 @@ impl<'a> Objective<'a> {
     /// Normalised cost, its gradient and, when `matrix`, its Gauss-Newton matrix (see
     /// [`Objective::gauss_newton`]) at `x`, from the batch kernel's pass with tangents where it
     /// renders the whole prediction and from the dual-number pass otherwise.
+    ///
+    /// Outside the space's box it is the pass at the projection onto the box with the pull back
+    /// [`OUTSIDE_PULL`] `|x - clamp(x)|^2` added: the gradient of `cost(clamp(x)) + pull`, whose
+    /// coordinates outside the box see only the pull (and its Gauss-Newton term `2 pull`).
     fn exact_pass(&self, x: &[f64], matrix: bool) -> Option<(f64, Vec<f64>, Option<Vec<f64>>)> {
+        let outside = self.space.outside(x);
+        if outside.iter().all(|&d| d == 0.0) {
+            let (loss, gradient, gauss_newton) = self.exact_pass_inside(x, matrix)?;
+            return Some((self.record(x, loss), gradient, gauss_newton));
+        }
+        let (loss, mut gradient, mut gauss_newton) =
+            self.exact_pass_inside(&self.space.clamp(x), matrix)?;
+        let n = x.len();
+        for (i, &d) in outside.iter().enumerate() {
+            if d == 0.0 {
+                continue;
+            }
+            gradient[i] = 2.0 * OUTSIDE_PULL * d;
+            if let Some(m) = gauss_newton.as_mut() {
+                for j in 0..n {
+                    m[i * n + j] = 0.0;
+                    m[j * n + i] = 0.0;
+                }
+                m[i * n + i] = 2.0 * OUTSIDE_PULL;
+            }
+        }
+        Some((self.record(x, loss + self.pull(x)), gradient, gauss_newton))
+    }
+
+    /// [`Objective::exact_pass`] at a point inside the box, the cost not yet recorded.
+    fn exact_pass_inside(
+        &self,
+        x: &[f64],
+        matrix: bool,
+    ) -> Option<(f64, Vec<f64>, Option<Vec<f64>>)> {
         let single_only = self.batch_lobe(&self.space.surface(x).single).is_some();
         let (loss, gradient, gauss_newton) = match x.len() {
             _ if single_only => Some(self.batch_pass(x, matrix)),
@@ -672,9 +726,12 @@ impl<'a> Objective<'a> {
             11 => self.dual_pass::<11>(x, matrix),
             _ => None,
         }?;
-        let cost = self.record(x, loss / self.scale);
         let normalise = |v: Vec<f64>| v.into_iter().map(|g| g / self.scale).collect::<Vec<_>>();
-        Some((cost, normalise(gradient), gauss_newton.map(normalise)))
+        Some((
+            loss / self.scale,
+            normalise(gradient),
+            gauss_newton.map(normalise),
+        ))
     }
 
     /// Loss and its gradient at `x` with `N` = `x.len()` dual directions: the coordinates are

@@ -9,6 +9,12 @@
 //! | `diffuse` per channel | `logit rho` | (0, 1) |
 //! | `exposure` (`--fit-exposure`), last | `ln s` | (0, inf) |
 //!
+//! The unbounded coordinates have a box ([`ParamSpace::bounds`]): roughness in
+//! [[`ALPHA_BOUNDS`]] (the range every model is defined and stress-tested on) and the exposure in
+//! [[`EXPOSURE_BOUNDS`]]. The objective evaluates a point outside the box at its projection onto
+//! the box plus a quadratic pull back ([`ParamSpace::outside`]), so no solver returns a value
+//! outside it and a search that presses against a bound stops there and says so.
+//!
 //! With a known Fresnel (`--fresnel-known`) the Fresnel has no coordinates. The exposure `s`
 //! multiplies every prediction (a global light power or camera gain). A flash photo determines
 //! only the product of `s` and the reflectance (the Fresnel is seen at normal incidence, and the
@@ -28,6 +34,13 @@ use crate::microfacet::fresnel::{
 use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
 use crate::scalar::{Real, Rgb};
 use serde::{Deserialize, Serialize};
+
+/// Roughness range of every fit: the models are defined and tested for alpha in [1e-4, 3]
+/// (`tabulated`'s table and the albedo tables end at 3; `bouncefit stress` sweeps 1e-4 to 3).
+pub const ALPHA_BOUNDS: (f64, f64) = (1e-4, 3.0);
+
+/// Range of a fitted exposure factor: six orders of magnitude around the manifest's lights.
+pub const EXPOSURE_BOUNDS: (f64, f64) = (1e-3, 1e3);
 
 /// Which Fresnel family a fit searches.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default, clap::ValueEnum)]
@@ -122,9 +135,51 @@ impl ParamSpace {
         Ok(())
     }
 
-    /// The exposure at coordinates `x`: `exp` of the last coordinate, or 1 when not fitted.
+    /// The box of the coordinates, `(lower, upper)` per coordinate: `ln alpha` within
+    /// [`ALPHA_BOUNDS`], `ln exposure` within [`EXPOSURE_BOUNDS`], the logits unbounded (their
+    /// sigmoids already keep F0, edge tint and albedo in (0, 1)).
+    pub fn bounds(&self) -> Vec<(f64, f64)> {
+        let roughness = (ALPHA_BOUNDS.0.ln(), ALPHA_BOUNDS.1.ln());
+        let mut bounds = vec![(f64::NEG_INFINITY, f64::INFINITY); self.dim()];
+        bounds[0] = roughness;
+        if self.anisotropic {
+            bounds[1] = roughness;
+        }
+        if self.exposure {
+            bounds[self.dim() - 1] = (EXPOSURE_BOUNDS.0.ln(), EXPOSURE_BOUNDS.1.ln());
+        }
+        bounds
+    }
+
+    /// `x` projected onto the box [`ParamSpace::bounds`].
+    pub fn clamp(&self, x: &[f64]) -> Vec<f64> {
+        x.iter()
+            .zip(self.bounds())
+            .map(|(&v, (lo, hi))| v.clamp(lo, hi))
+            .collect()
+    }
+
+    /// How far each coordinate of `x` lies outside the box: `x - clamp(x)`, zero inside.
+    pub fn outside(&self, x: &[f64]) -> Vec<f64> {
+        x.iter().zip(self.clamp(x)).map(|(v, c)| v - c).collect()
+    }
+
+    /// The names of the coordinates of `x` that lie on (or beyond) a bound of the box, within
+    /// 1e-6 (a quasi-Newton search approaches the kink of the pulled-back cost from inside).
+    pub fn at_bounds(&self, x: &[f64]) -> Vec<String> {
+        let names = self.names();
+        x.iter()
+            .zip(self.bounds())
+            .zip(names)
+            .filter(|((&v, (lo, hi)), _)| v <= lo + 1e-6 || v >= hi - 1e-6)
+            .map(|(_, name)| name)
+            .collect()
+    }
+
+    /// The exposure at coordinates `x` (projected onto the box): `exp` of the last coordinate,
+    /// or 1 when not fitted.
     pub fn exposure(&self, x: &[f64]) -> f64 {
-        self.surface(x).exposure
+        (self.surface(&self.clamp(x)).exposure).clamp(EXPOSURE_BOUNDS.0, EXPOSURE_BOUNDS.1)
     }
 
     /// Coordinate names, in order, for traces and reports.
@@ -203,11 +258,12 @@ impl ParamSpace {
         }
     }
 
-    /// The material at coordinates `x`.
+    /// The material at coordinates `x`, projected onto the box: no fit reports a value
+    /// outside it.
     pub fn material(&self, x: &[f64]) -> Material {
         let Surface {
             single, diffuse, ..
-        } = self.surface(x);
+        } = self.surface(&self.clamp(x));
         let fresnel = match (self.known_fresnel, single.fresnel) {
             (Some(known), _) => known,
             (None, Fresnel::Schlick { f0 }) => FresnelSpec::Schlick { f0: f0.0 },
@@ -220,7 +276,9 @@ impl ParamSpace {
             model: self.model,
             ndf: self.ndf,
             height: self.height,
-            alpha: [single.microfacet.ax, single.microfacet.ay],
+            // exp(ln 3) rounds to 3 + 4e-16: the bounds themselves are the values reported.
+            alpha: [single.microfacet.ax, single.microfacet.ay]
+                .map(|a| a.clamp(ALPHA_BOUNDS.0, ALPHA_BOUNDS.1)),
             fresnel,
             diffuse,
         }

@@ -2,10 +2,14 @@
 //!
 //! | method | when | what |
 //! | --- | --- | --- |
-//! | `projection` | Schlick Fresnel and a squared-error loss (the default fits) | the projected loss ([`super::projection`]) over roughness only: the roughness scan below, then Brent's method (isotropic) or Nelder-Mead (anisotropic) around the best node |
+//! | `projection` | Schlick Fresnel and a squared-error loss (the default fits) | the projected loss ([`super::projection`]) over roughness only: its [`Profile`] over the whole roughness range, then Brent's method (isotropic) or Nelder-Mead (anisotropic) in every competing basin |
 //! | `pso` | `--optimizer pso` | argmin's particle swarm over the box [`search_box`] of all coordinates, with a seeded generator |
-//! | `scan` | otherwise | the roughness scan with a white Fresnel whose per-channel scale is solved in closed form; conductors start at edge tint [`START_EDGE_TINT`]; with a known Fresnel, the scan renders it and one scale common to the channels is the start exposure |
+//! | `scan` | otherwise | the [`Profile`] of a white Fresnel whose per-channel scale is solved in closed form; a start at every competing basin; conductors start at edge tint [`START_EDGE_TINT`]; with a known Fresnel, the scan renders it and one scale common to the channels is the start exposure |
 //! | random | `--starts N`, for starts 2..N | uniform draws in [`search_box`], seeded |
+//!
+//! A fit runs one local search from each start the global phase returns (the competing basins
+//! of the profile, at most [`MAX_BASINS`]), and the fit reports the basins it did not choose
+//! when they end close to the chosen one (`crate::fit::point::Alternative`).
 
 use super::local::simplex_around;
 use super::objective::Objective;
@@ -33,25 +37,41 @@ pub enum StartMethod {
     Coarser,
 }
 
-/// Roughness values of the coarse start scan: a geometric grid (ratio 1.8) from 0.012 to 2.4
-/// that avoids round values, so fits of synthetic sets made at round roughness exercise the
-/// optimiser rather than land on a scan node.
-const SCAN_ALPHAS: [f64; 10] = [
-    0.012, 0.0216, 0.0389, 0.07, 0.126, 0.227, 0.408, 0.735, 1.32, 2.38,
+/// Roughness values of the coarse profile: a geometric grid (ratio 1.8) from 0.00114 to 2.38,
+/// and 2.95 below the top of the fitted range ([`super::params::ALPHA_BOUNDS`]), that avoids
+/// round values, so fits of synthetic sets made at round roughness exercise the optimiser
+/// rather than land on a node.
+const COARSE_ALPHAS: [f64; 15] = [
+    0.00114, 0.00206, 0.0037, 0.00667, 0.012, 0.0216, 0.0389, 0.07, 0.126, 0.227, 0.408, 0.735,
+    1.32, 2.38, 2.95,
 ];
 
-/// [`SCAN_ALPHAS`], with their geometric midpoints when `fine` (ratio 1.34).
-fn scan_alphas(fine: bool) -> Vec<f64> {
-    if fine {
-        SCAN_ALPHAS
-            .windows(2)
-            .flat_map(|w| [w[0], (w[0] * w[1]).sqrt()])
-            .chain([SCAN_ALPHAS[SCAN_ALPHAS.len() - 1]])
-            .collect()
-    } else {
-        SCAN_ALPHAS.to_vec()
-    }
-}
+/// The profile is refined by halving (in `ln alpha`) every interval wider than this ratio of
+/// roughness that has an end within [`REFINE_LOSS_RATIO`] of the lowest loss: three halvings of
+/// the coarse grid's 1.8. A basin of the loss over roughness can be narrower than 1.8: on a
+/// ring of point lights around a pinhole camera (`heitz` photos of copper at alpha 0.5) the
+/// projected loss was 1.95e-2 and 1.87e-2 at the nodes 0.408 and 0.735, 1.75e-2 in a rough
+/// basin at 1.32, and 1.33e-2 at 0.51 between them: the coarse grid saw only the rough basin,
+/// and the fit returned alpha 1.58.
+const PROFILE_RATIO: f64 = 1.16;
+
+/// Intervals of the profile with an end within this factor of the lowest loss are refined.
+const REFINE_LOSS_RATIO: f64 = 2.5;
+
+/// An interval whose ends differ by less than this fraction of the lowest loss is a plateau
+/// and is not refined: smooth enough, a flash capture's samples reflect no highlight into the
+/// camera, and the loss no longer depends on the roughness (on the real bath_tile the 17 nodes
+/// below alpha 0.03 all read 2.19 times the lowest loss, and halving them took 40 solves).
+const PLATEAU: f64 = 1e-3;
+
+/// A basin of the profile is searched when its lowest node's loss is within this factor of the
+/// lowest node's. On the ring-light set above the true basin's profile was 1.33e-2 against the
+/// rough basin's 1.66e-2 (both include the photos' noise): close enough that only a local
+/// search tells them apart. A basin many times worse cannot win.
+const BASIN_LOSS_RATIO: f64 = 1.5;
+
+/// At most this many basins are searched.
+pub const MAX_BASINS: usize = 3;
 
 /// Start edge tint of conductor fits (Gulbrandsen's g): measured metals lie between 0.85 and
 /// 0.99 (Cu, Au, Ag, Al at 450-650 nm), and for F0 above ~0.9 photos constrain g only weakly, so
@@ -63,14 +83,6 @@ const START_EDGE_TINT: f64 = 0.9;
 /// roughness anyway, and each of Brent's steps costs five renders. With the exact projection's
 /// 1.5e-8 the start of a bitterli fit of copper-flash took 28 steps; with this, 9.
 const APPROXIMATE_LN_ALPHA_TOLERANCE: f64 = 1e-4;
-
-/// The second-lowest basin of the projected start's scan is searched only when its node's
-/// loss is within this factor of the lowest node's. The case it is searched for had the two
-/// within 3% (see [`projected_start`]); a basin many times worse cannot win, and searching it
-/// is not free: on copper-flash, `turquin`'s second basin was the scan's last node (loss 0.61
-/// against 3.5e-7), and Brent's method crawled 36 steps toward the end of its bracket, 108 of
-/// the fit's 177 renders.
-const SECOND_BASIN_LOSS_RATIO: f64 = 2.0;
 
 /// Particles and iterations of the swarm (600 evaluations).
 const PSO_PARTICLES: usize = 20;
@@ -116,66 +128,135 @@ pub fn random_points(space: &ParamSpace, seed: u64, count: usize) -> Vec<Vec<f64
         .collect()
 }
 
-/// The scan start and its exposure: the node alpha whose white-Fresnel prediction, scaled per
-/// channel by the least-squares factor `sum p t / sum p^2`, has the lowest squared error. With
-/// a known Fresnel the probe has it, and one factor common to the channels is the exposure when
-/// it is fitted (`--fit-exposure`), none otherwise.
-pub fn scan_start(objective: &Objective) -> (Material, f64) {
+/// The loss over roughness that the global phase reads, at the nodes it has evaluated: the
+/// coarse grid [`COARSE_ALPHAS`] over the whole fitted range, refined by halving wherever the
+/// loss comes within [`REFINE_LOSS_RATIO`] of its lowest value, down to [`PROFILE_RATIO`],
+/// except on plateaus ([`PLATEAU`]).
+pub struct Profile {
+    /// `(ln alpha, loss)`, in increasing `ln alpha`.
+    pub nodes: Vec<(f64, f64)>,
+}
+
+impl Profile {
+    /// The profile of `loss` (a function of `ln alpha`).
+    pub fn of(loss: impl Fn(f64) -> f64) -> Profile {
+        let mut nodes: Vec<(f64, f64)> = COARSE_ALPHAS
+            .iter()
+            .map(|a| (a.ln(), loss(a.ln())))
+            .collect();
+        let finest = PROFILE_RATIO.ln();
+        loop {
+            let lowest = nodes.iter().map(|n| n.1).fold(f64::INFINITY, f64::min);
+            let mut refined = Vec::with_capacity(2 * nodes.len());
+            for pair in nodes.windows(2) {
+                refined.push(pair[0]);
+                let (a, b) = (pair[0], pair[1]);
+                let plateau = (a.1 - b.1).abs() <= PLATEAU * lowest.abs();
+                if b.0 - a.0 > finest && a.1.min(b.1) <= REFINE_LOSS_RATIO * lowest && !plateau {
+                    let mid = 0.5 * (a.0 + b.0);
+                    refined.push((mid, loss(mid)));
+                }
+            }
+            refined.push(nodes[nodes.len() - 1]);
+            if refined.len() == nodes.len() {
+                return Profile { nodes };
+            }
+            nodes = refined;
+        }
+    }
+
+    /// The basins worth a local search: the nodes lower than both neighbours (or than their one
+    /// neighbour at an end) whose loss is within [`BASIN_LOSS_RATIO`] of the lowest node's,
+    /// lowest first, at most [`MAX_BASINS`].
+    pub fn basins(&self) -> Vec<usize> {
+        let n = self.nodes.len();
+        let loss = |i: usize| self.nodes[i].1;
+        let lowest = (0..n).map(loss).fold(f64::INFINITY, f64::min);
+        let mut basins: Vec<usize> = (0..n)
+            .filter(|&i| {
+                (i == 0 || loss(i) <= loss(i - 1)) && (i + 1 == n || loss(i) < loss(i + 1))
+            })
+            .filter(|&i| loss(i) <= BASIN_LOSS_RATIO * lowest)
+            .collect();
+        basins.sort_by(|&a, &b| loss(a).total_cmp(&loss(b)));
+        basins.truncate(MAX_BASINS);
+        basins
+    }
+
+    /// `[alpha, loss]` of every node, for the fit file.
+    pub fn table(&self) -> Vec<[f64; 2]> {
+        self.nodes
+            .iter()
+            .map(|&(ln, loss)| [ln.exp(), loss])
+            .collect()
+    }
+
+    /// The `ln alpha` of the neighbours of node `i` (the node itself at an end).
+    fn bracket(&self, i: usize) -> (f64, f64) {
+        let last = self.nodes.len() - 1;
+        (
+            self.nodes[i.saturating_sub(1)].0,
+            self.nodes[(i + 1).min(last)].0,
+        )
+    }
+}
+
+/// The scan's squared error at roughness `alpha` and the per-channel scale that minimises it:
+/// the white-Fresnel prediction (or the known Fresnel's), scaled per channel by the
+/// least-squares factor `sum p t / sum p^2`. With a known Fresnel one factor common to the
+/// channels is the exposure when it is fitted (`--fit-exposure`), none otherwise.
+fn scan_error(objective: &Objective, alpha: f64) -> (f64, [f64; 3]) {
     let space = objective.space;
     let records = objective.records();
     let pixels = objective.pixels();
-    let mut best: Option<(f64, f64, [f64; 3])> = None;
-    // Known Fresnel and exposure fix the probe's brightness, which makes the error sharper in
-    // alpha: on the 1.8x grid a node next to the truth can lose to a much rougher one of the
-    // same energy (`kulla-conty` on heitz photos of white alpha 0.5 picked 1.32 and stopped at
-    // 1.58), so the grid gains its geometric midpoints (ratio 1.34).
-    let fixed_brightness = space.known_fresnel.is_some() && !space.exposure;
-    for alpha in scan_alphas(fixed_brightness) {
-        let probe = Material {
-            model: space.model,
-            ndf: space.ndf,
-            height: space.height,
-            alpha: [alpha; 2],
-            fresnel: space.known_fresnel.unwrap_or(FresnelSpec::White),
-            diffuse: [0.0; 3],
-        };
-        let predicted = objective.render(&probe, objective.seed());
-        let mut sums = [[0.0; 3]; 3];
-        for (c, [pt, pp, tt]) in sums.iter_mut().enumerate() {
-            for (k, &p) in pixels.iter().enumerate() {
-                let (w, t, q) = (records.weight[p], records.target[p][c], predicted[k][c]);
-                *pt += w * q * t;
-                *pp += w * q * q;
-                *tt += w * t * t;
-            }
-        }
-        let ratio = |pt: f64, pp: f64| if pp > 0.0 { pt / pp } else { 0.0 };
-        let scale = if fixed_brightness {
-            // The Fresnel and the exposure are both known: the probe's brightness is the
-            // prediction's. (A free factor here let a rough probe stand in for a smooth one:
-            // `tabulated` on heitz photos of white alpha 0.5 started at 2.38 and stopped in a
-            // local minimum at 1.06.)
-            [1.0; 3]
-        } else if space.known_fresnel.is_some() {
-            let common = ratio(
-                sums.iter().map(|s| s[0]).sum(),
-                sums.iter().map(|s| s[1]).sum(),
-            );
-            [common; 3]
-        } else {
-            sums.map(|[pt, pp, _]| ratio(pt, pp))
-        };
-        let err: f64 = (0..3)
-            .map(|c| {
-                let [pt, pp, tt] = sums[c];
-                tt - 2.0 * scale[c] * pt + scale[c] * scale[c] * pp
-            })
-            .sum();
-        if best.is_none_or(|b| err < b.0) {
-            best = Some((err, alpha, scale));
+    let probe = Material {
+        model: space.model,
+        ndf: space.ndf,
+        height: space.height,
+        alpha: [alpha; 2],
+        fresnel: space.known_fresnel.unwrap_or(FresnelSpec::White),
+        diffuse: [0.0; 3],
+    };
+    let predicted = objective.render(&probe, objective.seed());
+    let mut sums = [[0.0; 3]; 3];
+    for (c, [pt, pp, tt]) in sums.iter_mut().enumerate() {
+        for (k, &p) in pixels.iter().enumerate() {
+            let (w, t, q) = (records.weight[p], records.target[p][c], predicted[k][c]);
+            *pt += w * q * t;
+            *pp += w * q * q;
+            *tt += w * t * t;
         }
     }
-    let (_, alpha, scale) = best.expect("the scan has points");
+    let ratio = |pt: f64, pp: f64| if pp > 0.0 { pt / pp } else { 0.0 };
+    let scale = if space.known_fresnel.is_some() && !space.exposure {
+        // The Fresnel and the exposure are both known: the probe's brightness is the
+        // prediction's. (A free factor here let a rough probe stand in for a smooth one:
+        // `tabulated` on heitz photos of white alpha 0.5 started at 2.38 and stopped in a
+        // local minimum at 1.06.)
+        [1.0; 3]
+    } else if space.known_fresnel.is_some() {
+        let common = ratio(
+            sums.iter().map(|s| s[0]).sum(),
+            sums.iter().map(|s| s[1]).sum(),
+        );
+        [common; 3]
+    } else {
+        sums.map(|[pt, pp, _]| ratio(pt, pp))
+    };
+    let err = (0..3)
+        .map(|c| {
+            let [pt, pp, tt] = sums[c];
+            tt - 2.0 * scale[c] * pt + scale[c] * scale[c] * pp
+        })
+        .sum();
+    (err, scale)
+}
+
+/// The scan's start coordinates at roughness `alpha` with the channel scales `scale`: a
+/// Schlick F0 (or a conductor of edge tint [`START_EDGE_TINT`]) of the scales, or the known
+/// Fresnel with the common scale as the exposure.
+fn scan_point(objective: &Objective, alpha: f64, scale: [f64; 3]) -> Vec<f64> {
+    let space = objective.space;
     let f0 = scale.map(|s| s.clamp(0.02, 0.98));
     let fresnel = match (space.known_fresnel, space.fresnel) {
         (Some(known), _) => known,
@@ -201,7 +282,21 @@ pub fn scan_start(objective: &Objective) -> (Material, f64) {
     } else {
         1.0
     };
-    (material, exposure)
+    space.point(&material, exposure)
+}
+
+/// The scan starts: the [`Profile`] of [`scan_error`], and a start at each of its basins.
+pub fn scan_starts(objective: &Objective) -> (Vec<Vec<f64>>, Profile) {
+    let profile = Profile::of(|ln| scan_error(objective, ln.exp()).0);
+    let starts = profile
+        .basins()
+        .into_iter()
+        .map(|i| {
+            let alpha = profile.nodes[i].0.exp();
+            scan_point(objective, alpha, scan_error(objective, alpha).1)
+        })
+        .collect();
+    (starts, profile)
 }
 
 /// The projected loss as an argmin cost over roughness coordinates (a vector, or one scalar).
@@ -225,59 +320,18 @@ impl CostFunction for ProjectedScalar<'_, '_, '_> {
     }
 }
 
-/// Whether the projected loss halfway from the edge node `node` of the scan to its inner
-/// neighbour is below the node's, so that a minimum lies inside the grid's end interval.
-///
-/// An edge node is a basin of the scan only in that the loss falls toward the end of the grid,
-/// and where it keeps falling Brent's method crawls to the interval's end in golden sections:
-/// on the three real captures in `../shared/data/real` (`--depth 0.1`) the scan's last node,
-/// alpha 2.38, was a basin for `tabulated` and `kulla-conty`, and Brent spent 17 steps (51
-/// renders, 0.6-0.9 s) to return a loss no lower than the node's. One probe tells the cases
-/// apart.
-fn dips_inside(projection: &Projection, ln: &[f64], scan: &[f64], node: usize) -> bool {
-    let inner = if node == 0 { 1 } else { node - 1 };
-    let halfway = 0.5 * (ln[node] + ln[inner]);
+/// The projected starts: the [`Profile`] of the projected loss (isotropic roughness), and in
+/// each of its basins the projected minimum, by Brent's method between the basin's neighbours
+/// (isotropic) or Nelder-Mead from the basin's node (anisotropic); full coordinates, the
+/// lowest basin first.
+pub fn projected_starts(projection: &Projection) -> Result<(Vec<Vec<f64>>, Profile), ArgminError> {
     let dim = projection.roughness_dim;
-    projection.solve(&vec![halfway; dim]).0 < scan[node]
-}
-
-/// The projected start: full coordinates of the best projected solve.
-pub fn projected_start(projection: &Projection) -> Result<Vec<f64>, ArgminError> {
-    let ln: Vec<f64> = SCAN_ALPHAS.iter().map(|a| a.ln()).collect();
-    let dim = projection.roughness_dim;
-    let scan: Vec<f64> = ln
-        .iter()
-        .map(|&l| projection.solve(&vec![l; dim]).0)
-        .collect();
-    let best = (0..ln.len())
-        .min_by(|&a, &b| scan[a].total_cmp(&scan[b]))
-        .expect("the scan has points");
-    let roughness = if dim == 1 {
-        // The two lowest basins of the scan are searched (the second only when it competes,
-        // [`SECOND_BASIN_LOSS_RATIO`]): with F0 solved at every
-        // node a flash set can hold a rough basin within a few percent of the true one
-        // (`tabulated` on heitz photos of copper at alpha 0.5: 0.0304 at alpha 2.38 against
-        // 0.0296 near 0.5), and the nodes beside the truth, 1.8x off it, lost to the rough one.
-        let mut basins: Vec<usize> = (0..ln.len())
-            .filter(|&i| {
-                (i == 0 || scan[i] <= scan[i - 1]) && (i + 1 == ln.len() || scan[i] <= scan[i + 1])
-            })
-            .collect();
-        basins.sort_by(|&a, &b| scan[a].total_cmp(&scan[b]));
-        let mut found: Option<(f64, f64)> = None;
-        let competes = |node: usize| {
-            scan[node] - scan[best] <= (SECOND_BASIN_LOSS_RATIO - 1.0) * scan[best].abs()
-        };
-        for &node in basins.iter().take(2).filter(|&&node| competes(node)) {
-            let (lo, hi) = (ln[node.saturating_sub(1)], ln[(node + 1).min(ln.len() - 1)]);
-            if (node == 0 || node + 1 == ln.len()) && !dips_inside(projection, &ln, &scan, node) {
-                // The loss falls toward the end of the grid: Brent's interval ends at the node
-                // and it would crawl to that end; the local search goes on from the node.
-                if found.is_none_or(|f| scan[node] < f.0) {
-                    found = Some((scan[node], ln[node]));
-                }
-                continue;
-            }
+    let profile = Profile::of(|ln| projection.solve(&vec![ln; dim]).0);
+    let mut starts = Vec::new();
+    for node in profile.basins() {
+        let (ln, loss) = profile.nodes[node];
+        let (lo, hi) = profile.bracket(node);
+        let roughness = if dim == 1 && lo < ln && ln < hi {
             let solver = if projection.is_exact() {
                 BrentOpt::new(lo, hi).set_tolerance(1.5e-8, 1e-10)
             } else {
@@ -286,26 +340,25 @@ pub fn projected_start(projection: &Projection) -> Result<Vec<f64>, ArgminError>
             let res = Executor::new(ProjectedScalar(projection), solver)
                 .configure(|s| s.max_iters(100))
                 .run()?;
-            let x = *res.state.get_best_param().unwrap_or(&ln[node]);
-            let candidate = if scan[node] < res.state.get_best_cost() {
-                (scan[node], ln[node])
-            } else {
-                (res.state.get_best_cost(), x)
-            };
-            if found.is_none_or(|f| candidate.0 < f.0) {
-                found = Some(candidate);
+            match res.state.get_best_param() {
+                Some(&x) if res.state.get_best_cost() < loss => vec![x],
+                _ => vec![ln],
             }
-        }
-        vec![found.map_or(ln[best], |f| f.1)]
-    } else {
-        let centre = vec![ln[best]; dim];
-        let solver = NelderMead::new(simplex_around(&centre)).with_sd_tolerance(1e-12)?;
-        let res = Executor::new(Projected(projection), solver)
-            .configure(|s| s.max_iters(200))
-            .run()?;
-        res.state.get_best_param().cloned().unwrap_or(centre)
-    };
-    Ok(projection.solve(&roughness).1)
+        } else if dim == 1 {
+            // A basin at an end of the range: the loss falls toward the end, and the local
+            // search goes on from the node (the box holds it at the bound).
+            vec![ln]
+        } else {
+            let centre = vec![ln; dim];
+            let solver = NelderMead::new(simplex_around(&centre)).with_sd_tolerance(1e-12)?;
+            let res = Executor::new(Projected(projection), solver)
+                .configure(|s| s.max_iters(200))
+                .run()?;
+            res.state.get_best_param().cloned().unwrap_or(centre)
+        };
+        starts.push(projection.solve(&roughness).1);
+    }
+    Ok((starts, profile))
 }
 
 /// The particle swarm start over all coordinates, seeded by the fit's seed.
@@ -323,8 +376,96 @@ pub fn swarm_start(objective: &Objective, seed: u64) -> Result<Vec<f64>, ArgminE
     Ok(best)
 }
 
-/// Start coordinates of the scan start.
-pub fn scan_point(objective: &Objective) -> Vec<f64> {
-    let (material, exposure) = scan_start(objective);
-    objective.space.point(&material, exposure)
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A loss over `ln alpha` with a broad, shallow basin at `broad` and a narrow, deep one at
+    /// `narrow` (width `width` in `ln alpha`), above a floor of 1.
+    fn two_basins(broad: f64, narrow: f64, width: f64) -> impl Fn(f64) -> f64 {
+        move |ln: f64| {
+            2.0 - 0.8 * (-((ln - broad.ln()) / 1.0).powi(2)).exp()
+                - 1.0 * (-((ln - narrow.ln()) / width).powi(2)).exp()
+        }
+    }
+
+    /// The ring-light case's shape: a narrow basin between two coarse nodes (0.408 and 0.735)
+    /// that both lie above a broad, rough basin. The coarse grid alone sees only the rough one;
+    /// the refined profile finds the narrow one and ranks it first.
+    #[test]
+    fn the_profile_finds_a_basin_narrower_than_the_coarse_grid() {
+        let loss = two_basins(1.4, 0.52, 0.12);
+        let coarse: Vec<f64> = COARSE_ALPHAS.iter().map(|a| loss(a.ln())).collect();
+        let lowest = (0..coarse.len())
+            .min_by(|&a, &b| coarse[a].total_cmp(&coarse[b]))
+            .unwrap();
+        assert!(
+            COARSE_ALPHAS[lowest] > 1.0,
+            "the coarse grid alone picks the rough basin"
+        );
+        let profile = Profile::of(&loss);
+        let basins = profile.basins();
+        let first = profile.nodes[basins[0]].0.exp();
+        assert!((first / 0.52 - 1.0).abs() < 0.1, "first basin at {first}");
+        assert!(
+            basins
+                .iter()
+                .any(|&b| (profile.nodes[b].0.exp() / 1.4 - 1.0).abs() < 0.2),
+            "the rough basin is kept as a second start: {:?}",
+            basins
+                .iter()
+                .map(|&b| profile.nodes[b].0.exp())
+                .collect::<Vec<_>>()
+        );
+        // Nodes stay sorted, and the refinement reached the finest spacing near the best.
+        assert!(profile.nodes.windows(2).all(|w| w[0].0 < w[1].0));
+        let (lo, hi) = profile.bracket(basins[0]);
+        assert!(hi - lo <= 2.0 * PROFILE_RATIO.ln() + 1e-12);
+    }
+
+    /// A basin far worse than the best is not searched, and the number of searched basins is
+    /// bounded.
+    #[test]
+    fn only_competing_basins_are_searched() {
+        let far = |ln: f64| {
+            let d = (ln - 0.3f64.ln()).powi(2);
+            // Deep minimum at 0.3; ripples elsewhere that never come within 1.5x of it.
+            0.01 + d + 0.2 * (5.0 * ln).cos().abs()
+        };
+        let profile = Profile::of(far);
+        let basins = profile.basins();
+        let lowest = profile
+            .nodes
+            .iter()
+            .map(|n| n.1)
+            .fold(f64::INFINITY, f64::min);
+        assert!(!basins.is_empty() && basins.len() <= MAX_BASINS);
+        for &b in &basins {
+            assert!(profile.nodes[b].1 <= BASIN_LOSS_RATIO * lowest);
+        }
+        // A flat profile is a plateau: nothing to refine, one basin at its end.
+        let flat = Profile::of(|_| 1.0);
+        assert_eq!(flat.nodes.len(), COARSE_ALPHAS.len());
+        assert!(flat.basins().len() <= MAX_BASINS);
+        // A profile that keeps falling gently is refined near its lowest end only, and every
+        // interval at most three times: bounded work.
+        let gentle = Profile::of(|ln: f64| 2.0 - 0.05 * ln);
+        assert!(gentle.nodes.len() <= 8 * COARSE_ALPHAS.len());
+    }
+
+    /// The coarse grid spans the fitted range and avoids round values.
+    #[test]
+    fn the_coarse_grid_spans_the_fitted_range() {
+        let (lo, hi) = super::super::params::ALPHA_BOUNDS;
+        assert!(COARSE_ALPHAS[0] < 1.2e-3 && COARSE_ALPHAS[0] > lo);
+        assert!(COARSE_ALPHAS[COARSE_ALPHAS.len() - 1] < hi);
+        assert!(COARSE_ALPHAS[COARSE_ALPHAS.len() - 1] > 0.95 * hi);
+        for a in COARSE_ALPHAS {
+            for round in [
+                0.01, 0.05, 0.1, 0.2, 0.25, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.5, 2.0,
+            ] {
+                assert!((a / round - 1.0).abs() > 1e-3, "{a} is a round value");
+            }
+        }
+    }
 }
