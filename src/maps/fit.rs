@@ -16,7 +16,7 @@
 //! | 2 | noise level | `sigma^2 = sum r^2 / (residuals - parameters)` of stage 1, so the data term is a Gaussian log-likelihood and the prior's units are those of the coordinates |
 //! | 3 | `K` basis materials | k-means over the texels' specular coordinates (`ln alpha`, `logit F0`), each coordinate weighted by its Gauss-Newton precision `(J^T J)_jj` (a texel's diagonal Laplace approximation), so poorly seen texels hardly move the bases and are assigned by what is seen of them |
 //! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; each texel as either kind (a texel of the basis's other kind takes only its roughness), from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own; the texels' priors are centred on the precision-weighted means of their basis's texels, and the bases reported are then re-estimated by maximum likelihood on the photos of their texels of their kind together (Gauss-Newton, each texel with its own albedo, [`pooled_centre`]), since that mean is biased low under noise |
-//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels; the fewest bases within 2% of the best error are kept, with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
+//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels and at their resolution ([`texel_relative_error`]); the fewest bases within 2% of the best error are kept (a basis no texel takes is dropped, [`Clusters::drop_empty`]), with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
 //!
 //! Texels are independent given the bases, so each is a small dense problem (4 to 10
 //! coordinates: `ln alpha` (with `anisotropic`, `ln alpha_x` and `ln alpha_y`, each with the
@@ -176,7 +176,11 @@ pub struct Basis {
 /// The validation error of one number of bases.
 #[derive(Clone, Debug, Serialize)]
 pub struct BasisTrial {
+    /// The number of bases tried (k-means' `K`).
     pub bases: usize,
+    /// The bases left once the texels' labels were chosen: a basis no texel took is dropped
+    /// ([`basis_fits`]), so this may be fewer than `bases`.
+    pub bases_kept: usize,
     /// The roughness floor with the lowest validation error for this number of bases (`null`:
     /// none).
     pub roughness_floor: Option<f64>,
@@ -993,7 +997,7 @@ fn validated_bases(
             let error_at = |floor: Option<f64>| {
                 let texels = with_roughness_floor(&fits.texels, model.roughness_dim(), floor);
                 let predicted = maps_prediction(model, &texels, options.grid, &validation);
-                relative_error(&predicted, records, &validation)
+                texel_relative_error(&predicted, records, &validation, options.grid)
             };
             let errors: Vec<(Option<f64>, f64)> = ROUGHNESS_FLOORS
                 .iter()
@@ -1006,6 +1010,7 @@ fn validated_bases(
             tick(&format!("{k} bases{normals}: validation error {error:.4}"));
             BasisTrial {
                 bases: k,
+                bases_kept: fits.bases.len(),
                 roughness_floor,
                 validation_error: error,
                 // `ROUGHNESS_FLOORS[0]` is no floor.
@@ -1160,6 +1165,7 @@ fn basis_fits(
                 .zip(&clusters.assignment)
                 .map(|(mut options, &b)| options.swap_remove(b).1)
                 .collect();
+            clusters.drop_empty(&seen);
         } else {
             texels = (0..texels.len())
                 .into_par_iter()
@@ -1178,7 +1184,7 @@ fn basis_fits(
         let (kind, labels) = (clusters.kinds[b], &clusters.assignment);
         pooled_centre(model, blocks, &texels, labels, b, kind, centre, sigma2);
     }
-    let total = clusters.assignment.len().max(1) as f64;
+    let total = seen.len().max(1) as f64;
     let bases = clusters
         .centres
         .iter()
@@ -1191,7 +1197,11 @@ fn basis_fits(
             f0: (specular == roughness + 3).then(|| {
                 [0, 1, 2].map(|j| crate::fit::point::params::sigmoid(centre[roughness + j]))
             }),
-            share: clusters.assignment.iter().filter(|&&a| a == c).count() as f64 / total,
+            share: seen
+                .iter()
+                .filter(|&&t| clusters.assignment[t] == c)
+                .count() as f64
+                / total,
         })
         .collect();
     BasisFits {
@@ -1349,6 +1359,44 @@ struct Clusters {
 }
 
 impl Clusters {
+    /// Drops the bases no seen texel is labelled with, and renumbers the labels (an unseen
+    /// texel of a dropped basis takes the first basis kept; it is filled from its neighbours
+    /// afterwards). k-means finds a basis for any tight group of texels, however small; the
+    /// labels, chosen with the Potts prior, can leave it without a texel (a few texels of
+    /// `datasets/two-materials`' copper that `single` took for a metal, 0.5% of them at 48^2,
+    /// each surrounded by copper taken for a dielectric). A basis without texels has no
+    /// estimate; kept, it was reported with a share of 0 and counted as a basis in the choice
+    /// of `K`.
+    fn drop_empty(&mut self, seen: &[usize]) {
+        let mut used = vec![false; self.centres.len()];
+        for &t in seen {
+            used[self.assignment[t]] = true;
+        }
+        if used.iter().all(|&u| u) || !used.iter().any(|&u| u) {
+            return;
+        }
+        let mut renumbered = vec![0; used.len()];
+        let mut next = 0;
+        for (b, &u) in used.iter().enumerate() {
+            if u {
+                renumbered[b] = next;
+                next += 1;
+            }
+        }
+        for label in &mut self.assignment {
+            *label = if used[*label] { renumbered[*label] } else { 0 };
+        }
+        fn keep<T>(values: &mut Vec<T>, used: &[bool]) {
+            let mut b = 0;
+            values.retain(|_| {
+                b += 1;
+                used[b - 1]
+            });
+        }
+        keep(&mut self.centres, &used);
+        keep(&mut self.kinds, &used);
+    }
+
     /// Each centre becomes the precision-weighted mean of its texels' first `dim` coordinates;
     /// once the bases have kinds, a basis's F0 is that of its texels of its own kind only (the
     /// first `roughness` coordinates come from all its texels).
@@ -1542,6 +1590,42 @@ fn maps_prediction(
                 .expect("one pixel, one prediction")
         })
         .collect()
+}
+
+/// [`relative_error`] at the resolution of the texel grid: each texel's pixels are summed
+/// (weighted, per channel) before prediction and photo are compared, `sqrt(sum_t (P_t -
+/// T_t)^2 / sum_t T_t^2)`. Maps hold one material per texel, so the detail within a texel (a
+/// material edge crossing it, an albedo gradient) is an error no number of bases and no
+/// roughness floor changes, and neither is the photo's noise: per pixel, on
+/// `datasets/two-materials` at 16^2 texels (8 x 8 pixels each), they made 0.100 of the
+/// validation photo's 0.101, and the copper basis's gain came to 0.6% (docs/maps.md, "The
+/// number of bases"). With one pixel per texel this is [`relative_error`].
+fn texel_relative_error(
+    predicted: &[[f64; 3]],
+    records: &ShadingRecords,
+    pixels: &[usize],
+    grid: TexelGrid,
+) -> f64 {
+    let spp = records.samples_per_pixel;
+    let mut sums = std::collections::BTreeMap::<usize, [[f64; 3]; 2]>::new();
+    for (value, &p) in predicted.iter().zip(pixels) {
+        let w = records.weight[p];
+        let sum = sums
+            .entry(grid.texel(records.uv[p * spp + spp / 2]))
+            .or_insert([[0.0; 3]; 2]);
+        for c in 0..3 {
+            sum[0][c] += w * value[c];
+            sum[1][c] += w * records.target[p][c];
+        }
+    }
+    let (mut error, mut signal) = (0.0, 0.0);
+    for [p, t] in sums.values() {
+        for c in 0..3 {
+            error += (p[c] - t[c]).powi(2);
+            signal += t[c] * t[c];
+        }
+    }
+    (error / signal.max(1e-300)).sqrt()
 }
 
 /// `sqrt(sum w (p - t)^2 / sum w t^2)` over `pixels`.
