@@ -639,28 +639,13 @@ struct FitResult {
     warned: bool,
 }
 
-/// `bouncefit fit SET -o OUT/fit.json --quiet --force EXTRA...`, or the error it printed.
+/// The default or reference fit of a case, or the error it printed.
 fn try_fit(set: &Path, extra: &[&str], out: &Path) -> Result<FitResult, String> {
     std::fs::create_dir_all(out).unwrap();
-    let fit_path = out.join("fit.json");
-    let mut args = vec![
-        "fit",
-        set.to_str().unwrap(),
-        "-o",
-        fit_path.to_str().unwrap(),
-        "--quiet",
-        "--force",
-    ];
-    args.extend_from_slice(extra);
-    let (code, _, stderr) = run(&args);
-    if code != Some(0) {
-        return Err(format!("fit {extra:?} exited {code:?}: {}", stderr.trim()));
-    }
-    let fit = read_json(&fit_path);
+    let fit = try_fit_json(set, extra, out)?;
     Ok(FitResult {
         alpha: fit["alpha"][0].as_f64().unwrap(),
         loss: fit["loss"].as_f64().unwrap(),
-        // `warnings` is new; a fit file without it has none.
         warned: fit["warnings"].as_array().is_some_and(|w| !w.is_empty()),
     })
 }

@@ -112,8 +112,9 @@ pub fn material_f0(material: &serde_json::Value) -> [f64; 3] {
     }
 }
 
-/// `bouncefit fit SET -o OUT/fit.json --quiet EXTRA...`; returns the fit file.
-pub fn fit_json(set: &Path, extra: &[&str], out: &Path) -> serde_json::Value {
+/// `bouncefit fit SET -o OUT/fit.json --quiet --force EXTRA...`: the fit file, or what the
+/// command printed when it failed.
+pub fn try_fit_json(set: &Path, extra: &[&str], out: &Path) -> Result<serde_json::Value, String> {
     let fit_path = out.join("fit.json");
     let mut args = vec![
         "fit",
@@ -124,8 +125,16 @@ pub fn fit_json(set: &Path, extra: &[&str], out: &Path) -> serde_json::Value {
         "--force",
     ];
     args.extend_from_slice(extra);
-    run_ok(&args);
-    read_json(&fit_path)
+    let (code, _, stderr) = run(&args);
+    if code != Some(0) {
+        return Err(format!("fit {extra:?} exited {code:?}: {}", stderr.trim()));
+    }
+    Ok(read_json(&fit_path))
+}
+
+/// `bouncefit fit SET -o OUT/fit.json --quiet --force EXTRA...`; returns the fit file.
+pub fn fit_json(set: &Path, extra: &[&str], out: &Path) -> serde_json::Value {
+    try_fit_json(set, extra, out).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// `bouncefit synth --material M --capture C -o OUT EXTRA...`.
