@@ -745,24 +745,19 @@ fn run_case(mut case: Case) -> Row {
             case.pixel_samples.to_string(),
             case.synth_seed.to_string(),
         );
-        let (code, _, stderr) = run(&[
-            "synth",
-            "--material",
-            material.to_str().unwrap(),
-            "--capture",
-            capture.to_str().unwrap(),
-            "-o",
-            set.to_str().unwrap(),
-            "--noise",
-            &noise,
-            "--pixel-samples",
-            &samples,
-            "--seed",
-            &seed,
-        ]);
-        if code != Some(0) {
-            return Err(format!("synth exited {code:?}: {}", stderr.trim()));
-        }
+        try_synth(
+            &material,
+            &capture,
+            &set,
+            &[
+                "--noise",
+                &noise,
+                "--pixel-samples",
+                &samples,
+                "--seed",
+                &seed,
+            ],
+        )?;
         peak = (0..case.photos.len())
             .map(|i| brightest(&set.join(format!("{i:02}.exr"))))
             .fold(0.0, f64::max);

@@ -137,8 +137,14 @@ pub fn fit_json(set: &Path, extra: &[&str], out: &Path) -> serde_json::Value {
     try_fit_json(set, extra, out).unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// `bouncefit synth --material M --capture C -o OUT EXTRA...`.
-pub fn synth(material: &Path, capture: &Path, out: &Path, extra: &[&str]) {
+/// `bouncefit synth --material M --capture C -o OUT EXTRA...`, or what the command printed
+/// when it failed.
+pub fn try_synth(
+    material: &Path,
+    capture: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> Result<(), String> {
     let mut args = vec![
         "synth",
         "--material",
@@ -149,5 +155,14 @@ pub fn synth(material: &Path, capture: &Path, out: &Path, extra: &[&str]) {
         out.to_str().unwrap(),
     ];
     args.extend_from_slice(extra);
-    run_ok(&args);
+    let (code, _, stderr) = run(&args);
+    if code != Some(0) {
+        return Err(format!("synth exited {code:?}: {}", stderr.trim()));
+    }
+    Ok(())
+}
+
+/// `bouncefit synth --material M --capture C -o OUT EXTRA...`.
+pub fn synth(material: &Path, capture: &Path, out: &Path, extra: &[&str]) {
+    try_synth(material, capture, out, extra).unwrap_or_else(|e| panic!("{e}"))
 }
