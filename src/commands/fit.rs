@@ -321,6 +321,7 @@ impl FitOptionArgs {
             checkpoint: Some(checkpoint),
             resume: mcmc.resume,
             stop_after: mcmc.mcmc_stop_after,
+            mode_starts: Vec::new(),
         }
     }
 }
@@ -431,10 +432,39 @@ pub fn fit_and_sample(
             "an interrupted sampler run left this file; pass --resume to continue it or --force to start over",
         ));
     }
+    let fit_and_print = |model: Model| -> Result<ModelFit> {
+        let fit = fit_model(records, &options.fit_options(model, !quiet))?;
+        if !quiet {
+            // A corrected stochastic fit also says how far its walks' noise leaves alpha.
+            let noise = fit
+                .correction
+                .as_ref()
+                .and_then(|c| c.alpha_noise)
+                .map_or(String::new(), |n| {
+                    format!(" (walks' noise {:.2}%)", 100.0 * n[0].max(n[1]))
+                });
+            eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}{}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], noise, fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
+        }
+        Ok(fit)
+    };
+    // On a subset of the pixels the chains' MAP fits may miss a basin that the fits on every
+    // pixel find, so those come first and hand the sampler their other basins as modes.
+    let mut fits = if mcmc.mcmc && mcmc.mcmc_pixels != 0 && !mcmc.resume {
+        models
+            .iter()
+            .map(|&model| fit_and_print(model))
+            .collect::<Result<Vec<_>>>()?
+    } else {
+        Vec::new()
+    };
     let posterior = if mcmc.mcmc {
         let spaces: Vec<ParamSpace> = models.iter().map(|&m| options.space(m)).collect();
         let mut mcmc_options = options.mcmc_options(mcmc, models, checkpoint.clone());
         mcmc_options.map.progress = !quiet;
+        mcmc_options.mode_starts = fits
+            .iter()
+            .map(|fit| fit.alternatives.iter().map(|a| a.point.clone()).collect())
+            .collect();
         match sample_posterior(records, &spaces, &mcmc_options)? {
             Some(run) => Some(run),
             None => {
@@ -448,36 +478,47 @@ pub fn fit_and_sample(
     } else {
         None
     };
-    let mut fits = match &posterior {
-        Some(run) if run.all_pixels => run.maps.clone(),
-        _ => Vec::new(),
-    };
-    for &model in models.iter().skip(fits.len()) {
-        let fit = fit_model(records, &options.fit_options(model, !quiet))?;
-        if !quiet {
-            // A corrected stochastic fit also says how far its walks' noise leaves alpha.
-            let noise = fit
-                .correction
-                .as_ref()
-                .and_then(|c| c.alpha_noise)
-                .map_or(String::new(), |n| {
-                    format!(" (walks' noise {:.2}%)", 100.0 * n[0].max(n[1]))
-                });
-            eprintln!("{}: loss {:.6e}, alpha {:.5} {:.5}{}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})", model, fit.loss, fit.material.alpha[0], fit.material.alpha[1], noise, fit.f0[0], fit.f0[1], fit.f0[2], fit.evaluations, fit.seconds, fit.termination);
+    if fits.is_empty() {
+        if let Some(run) = posterior.as_ref().filter(|run| run.all_pixels) {
+            fits = run.maps.clone();
         }
-        fits.push(fit);
     }
-    if posterior.is_some() {
-        // The chains explore the MAP's basin: say so where another basin is as good.
+    for &model in models.iter().skip(fits.len()) {
+        fits.push(fit_and_print(model)?);
+    }
+    if let Some(run) = &posterior {
         for fit in &mut fits {
-            if let Some(other) = fit.alternatives.first() {
-                let warning = format!(
+            let model = fit.material.model.name();
+            let modes: Vec<_> = run
+                .posterior
+                .modes
+                .iter()
+                .filter(|m| m.model.split('+').next() == Some(model))
+                .collect();
+            if modes.len() > 1 {
+                // The chains jumped between the basins: say how the draws split.
+                let shares: Vec<String> = modes
+                    .iter()
+                    .map(|m| {
+                        format!(
+                            "alpha {:.4} (probability {:.3}, Laplace {:.3})",
+                            m.alpha[0], m.probability, m.laplace_probability
+                        )
+                    })
+                    .collect();
+                fit.warnings.push(format!(
+                    "--mcmc: the posterior has {} modes, {}; the intervals pool them",
+                    modes.len(),
+                    shares.join(", ")
+                ));
+            } else if let Some(other) = fit.alternatives.first() {
+                // The chains explore the MAP's basin only: say so where another basin is as good.
+                fit.warnings.push(format!(
                     "--mcmc: the chains start in the basin of alpha {:.4} and the intervals \
                      describe that basin only; the posterior has another mode near alpha {:.4} \
                      (loss x{:.4})",
                     fit.material.alpha[0], other.alpha[0], other.loss_ratio
-                );
-                fit.warnings.push(warning);
+                ));
             }
         }
     }

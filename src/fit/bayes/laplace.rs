@@ -158,6 +158,26 @@ impl Laplace {
             + self.log_det_sqrt_covariance()
     }
 
+    /// `ln` of this approximation's normal density at `x`, up to the constant `-d/2 ln 2 pi`.
+    pub fn log_normal_density(&self, x: &[f64]) -> f64 {
+        -0.5 * self.to_standard(x).iter().map(|z| z * z).sum::<f64>()
+            - self.log_det_sqrt_covariance()
+    }
+
+    /// Index of the approximation in `modes` whose normal density is highest at `x`.
+    pub fn nearest(modes: &[Laplace], x: &[f64]) -> usize {
+        if modes.len() == 1 {
+            return 0;
+        }
+        (0..modes.len())
+            .max_by(|&a, &b| {
+                modes[a]
+                    .log_normal_density(x)
+                    .total_cmp(&modes[b].log_normal_density(x))
+            })
+            .expect("at least one mode")
+    }
+
     /// Posterior standard deviation of each coordinate.
     pub fn standard_deviations(&self) -> Vec<f64> {
         standard_deviations(&self.precision)

@@ -5,12 +5,15 @@
 //!    ([`log_posterior::pixel_subset`]; `--mcmc-pixels`).
 //! 2. MAP start: [`fit_point`] (with the exposure's interval, [`with_interval`]) for every candidate on those records; the noise level is given
 //!    or estimated from the lowest MAP loss (one level for all candidates).
-//! 3. Laplace approximation of each candidate's log posterior at its MAP ([`Laplace`]).
+//! 3. Laplace approximation of each candidate's log posterior at its MAP ([`Laplace`]), and at
+//!    every other basin the MAP fit reports as almost as good (its `alternatives`): the modes
+//!    the chains jump between.
 //! 4. Chains: `chains` product-space chains ([`sampler`]), chain `c` starting in candidate
-//!    `c mod candidates` at a draw from its Laplace approximation with doubled spread
-//!    ([`START_DISPERSION`]), `warmup` adaptive iterations then `samples` kept ones.
-//! 5. Summary: the [`Posterior`] object, with both the visit frequencies of the models and the
-//!    Laplace-evidence probabilities.
+//!    `c mod candidates`, in its mode `(c / candidates) mod modes`, at a draw from that mode's
+//!    Laplace approximation with doubled spread ([`START_DISPERSION`]), `warmup` adaptive
+//!    iterations then `samples` kept ones.
+//! 5. Summary: the [`Posterior`] object, with both the visit frequencies of the models (and of
+//!    the modes) and the Laplace-evidence probabilities.
 //!
 //! | option | default (CLI) | effect |
 //! | --- | --- | --- |
@@ -40,7 +43,7 @@ use super::sampler::{self, Candidate, ChainState, Schedule, Target};
 use crate::bsdf::Model;
 use crate::error::{Error, Result};
 use crate::fit::point::params::ParamSpace;
-use crate::fit::point::{fit_point, FitOptions, ModelFit, Optimizer};
+use crate::fit::point::{fit_point, FitOptions, ModelFit, Optimizer, DISTINCT_LN_ALPHA};
 use crate::progress::Progress;
 use crate::shading::ShadingRecords;
 use serde::{Deserialize, Serialize};
@@ -75,6 +78,9 @@ pub struct McmcOptions {
     pub resume: bool,
     /// Stop (and checkpoint) after this many iterations per chain: for testing resumption.
     pub stop_after: Option<u64>,
+    /// Per candidate, coordinates of other basins to approximate as modes besides those its MAP
+    /// fit finds (the `alternatives` of a fit on every pixel when the likelihood has a subset).
+    pub mode_starts: Vec<Vec<Vec<f64>>>,
 }
 
 /// A finished run: the posterior and the MAP fits it started from.
@@ -93,7 +99,8 @@ pub struct PosteriorRun {
 struct Setup {
     maps: Vec<ModelFit>,
     noise: Noise,
-    laplace: Vec<Laplace>,
+    /// Laplace approximations of each candidate at its modes, the MAP's first.
+    modes: Vec<Vec<Laplace>>,
     /// Model-error adjustment of each candidate's likelihood.
     adjustments: Vec<Option<Adjustment>>,
     map_seconds: f64,
@@ -279,10 +286,38 @@ fn prepare(
         )
         .with_adjustment(adjustment)
     };
-    let mut laplace: Vec<Laplace> = candidates
+    // Each basin the MAP fit found as almost as good is a mode, unless its approximation's
+    // mean falls in a basin already held.
+    let at_modes = |target: &LogPosterior, starts: &[Vec<f64>]| {
+        let mut modes: Vec<Laplace> = Vec::new();
+        for start in starts {
+            let mode = Laplace::at_mode(target, start);
+            if modes
+                .iter()
+                .all(|m| (m.mean[0] - mode.mean[0]).abs() >= DISTINCT_LN_ALPHA)
+            {
+                modes.push(mode);
+            }
+        }
+        modes
+    };
+    let starts: Vec<Vec<Vec<f64>>> = candidates
         .iter()
         .zip(&maps)
-        .map(|(&space, map)| Laplace::at_mode(&target(space, None), &map.point(&space)))
+        .enumerate()
+        .map(|(index, (space, map))| {
+            let given = options.mode_starts.get(index).into_iter().flatten();
+            std::iter::once(map.point(space))
+                .chain(map.alternatives.iter().map(|a| a.point.clone()))
+                .chain(given.cloned())
+                .filter(|x| x.len() == space.dim())
+                .collect()
+        })
+        .collect();
+    let mut modes: Vec<Vec<Laplace>> = candidates
+        .iter()
+        .zip(&starts)
+        .map(|(&space, starts)| at_modes(&target(space, None), starts))
         .collect();
     let discrepancy_floor = (options.model_error == ModelError::Discrepancy).then(|| {
         options
@@ -293,19 +328,20 @@ fn prepare(
         ModelError::None => vec![None; candidates.len()],
         ModelError::Photos | ModelError::Discrepancy => candidates
             .iter()
-            .zip(&laplace)
-            .map(|(&space, l)| model_error::adjust(&target(space, None), l, discrepancy_floor))
+            .zip(&modes)
+            .map(|(&space, m)| model_error::adjust(&target(space, None), &m[0], discrepancy_floor))
             .collect(),
     };
-    for ((l, &space), adjustment) in laplace.iter_mut().zip(candidates).zip(&adjustments) {
+    for ((m, &space), adjustment) in modes.iter_mut().zip(candidates).zip(&adjustments) {
         if adjustment.is_some() {
-            *l = Laplace::at_mode(&target(space, adjustment.clone()), &l.mean);
+            let means: Vec<Vec<f64>> = m.iter().map(|l| l.mean.clone()).collect();
+            *m = at_modes(&target(space, adjustment.clone()), &means);
         }
     }
     Ok(Setup {
         maps,
         noise,
-        laplace,
+        modes,
         adjustments,
         map_seconds,
     })
@@ -346,10 +382,10 @@ pub fn sample_posterior(
         .collect();
     let chain_candidates: Vec<Candidate> = targets
         .iter()
-        .zip(&setup.laplace)
-        .map(|(target, laplace)| Candidate {
+        .zip(&setup.modes)
+        .map(|(target, modes)| Candidate {
             target: target as &dyn Target,
-            laplace: laplace.clone(),
+            modes: modes.clone(),
         })
         .collect();
     let mut states = states.unwrap_or_else(|| {
@@ -409,7 +445,6 @@ pub fn sample_posterior(
         checkpoint(&states, started.elapsed().as_secs_f64())?;
         return Ok(None);
     }
-    let log_evidence = setup.laplace.iter().map(Laplace::log_evidence).collect();
     let posterior = summarise(
         candidates,
         &states,
@@ -441,7 +476,7 @@ pub fn sample_posterior(
                 })
                 .collect(),
             pixels,
-            log_evidence,
+            modes: setup.modes.clone(),
             map_seconds: setup.map_seconds,
             seconds,
         },

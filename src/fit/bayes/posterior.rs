@@ -17,10 +17,12 @@
 //! | `laplace_models` | the model probabilities from the Laplace evidence of each candidate: a cross-check that needs no mixing between models (if the two disagree, either the jumps did not mix or a posterior is far from Gaussian) |
 //! | `per_model` | probability, draws and parameter summary within each candidate (no diagnostics: the draws of one model are not a Markov chain) |
 //! | `acceptance` | within-model (MALA) and between-model acceptance rates after warm-up |
+//! | `modes` | present when a candidate's point fit found another basin almost as good (its `alternatives`) and the chains jumped between them ([`super::sampler`]): per mode, the candidate's label, alpha at the mode, the share of all kept draws nearest to it (by its Laplace density) and its share by Laplace evidence |
 //! | `noise` | the likelihood's reading, noise level and whether it was estimated |
 //! | `model_error` | per candidate (labels as in `per_model`): the model-error adjustment's method, the photos it compared, each coordinate's widening (adjusted over model-only standard deviation) and, with `--model-error discrepancy`, the fitted discrepancy's most likely scales `discrepancy.photo` and `discrepancy.lobe` and their posterior root-mean-square `photo_rms`, `lobe_rms` ([`super::discrepancy`]); absent with `--model-error none` ([`super::model_error`]) |
 
 use super::diagnostics::{bulk_ess, split_rhat};
+use super::laplace::Laplace;
 use super::log_posterior::Noise;
 use super::sampler::{ChainState, Counts, Draw};
 use crate::fit::point::params::{FresnelFamily, ParamSpace};
@@ -69,6 +71,21 @@ pub struct ModelSummary {
 pub struct Acceptance {
     pub within_model: Option<f64>,
     pub between_models: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub between_modes: Option<f64>,
+}
+
+/// One mode of a candidate's posterior that the chains jumped between.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModeSummary {
+    /// The candidate's label, as in `per_model`.
+    pub model: String,
+    /// Roughness at the mode (`[alpha_x, alpha_y]`).
+    pub alpha: [f64; 2],
+    /// Share of all kept draws nearest to this mode.
+    pub probability: f64,
+    /// Share by the Laplace evidence of each mode of each candidate.
+    pub laplace_probability: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -82,6 +99,8 @@ pub struct Posterior {
     pub samples: usize,
     pub laplace_models: BTreeMap<String, f64>,
     pub per_model: BTreeMap<String, ModelSummary>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub modes: Vec<ModeSummary>,
     pub acceptance: Acceptance,
     pub sampler: String,
     pub chains: usize,
@@ -245,9 +264,48 @@ pub struct RunFacts {
     pub noise: Noise,
     pub model_error: BTreeMap<String, ModelErrorSummary>,
     pub pixels: usize,
-    pub log_evidence: Vec<f64>,
+    /// Laplace approximations of each candidate at its modes, the MAP's first.
+    pub modes: Vec<Vec<Laplace>>,
     pub map_seconds: f64,
     pub seconds: f64,
+}
+
+/// `ln` of the sum of `exp` of `values`.
+fn log_sum_exp(values: impl Iterator<Item = f64> + Clone) -> f64 {
+    let top = values.clone().fold(f64::NEG_INFINITY, f64::max);
+    if !top.is_finite() {
+        return top;
+    }
+    top + values.map(|v| (v - top).exp()).sum::<f64>().ln()
+}
+
+/// Each mode's share of the draws and of the Laplace evidence, when a candidate has more than one.
+fn summarise_modes(
+    spaces: &[ParamSpace],
+    draws: &[&Draw],
+    modes: &[Vec<Laplace>],
+) -> Vec<ModeSummary> {
+    if modes.iter().all(|m| m.len() < 2) {
+        return Vec::new();
+    }
+    let evidence = || modes.iter().flatten().map(Laplace::log_evidence);
+    let total = log_sum_exp(evidence());
+    let mut counts: Vec<Vec<usize>> = modes.iter().map(|m| vec![0; m.len()]).collect();
+    for draw in draws {
+        counts[draw.model][Laplace::nearest(&modes[draw.model], &draw.x)] += 1;
+    }
+    let mut out = Vec::new();
+    for (index, candidate) in modes.iter().enumerate() {
+        for (mode, laplace) in candidate.iter().enumerate() {
+            out.push(ModeSummary {
+                model: candidate_label(spaces, index),
+                alpha: spaces[index].material(&laplace.mean).alpha,
+                probability: counts[index][mode] as f64 / draws.len().max(1) as f64,
+                laplace_probability: (laplace.log_evidence() - total).exp(),
+            });
+        }
+    }
+    out
 }
 
 /// The posterior object from finished chains over the candidates `spaces`.
@@ -270,12 +328,20 @@ pub fn summarise(spaces: &[ParamSpace], states: &[ChainState], facts: RunFacts) 
     let mut models = BTreeMap::new();
     let mut per_model = BTreeMap::new();
     let mut laplace_models = BTreeMap::new();
-    let top = facts
-        .log_evidence
+    // A candidate's evidence sums over its modes.
+    let log_evidence: Vec<f64> = (0..spaces.len())
+        .map(|index| match facts.modes.get(index) {
+            Some(modes) if !modes.is_empty() => {
+                log_sum_exp(modes.iter().map(Laplace::log_evidence))
+            }
+            _ => f64::NEG_INFINITY,
+        })
+        .collect();
+    let top = log_evidence
         .iter()
         .copied()
         .fold(f64::NEG_INFINITY, f64::max);
-    let evidence_sum: f64 = facts.log_evidence.iter().map(|l| (l - top).exp()).sum();
+    let evidence_sum: f64 = log_evidence.iter().map(|l| (l - top).exp()).sum();
     let mut diffuse_share = 0.0;
     for (index, space) in spaces.iter().enumerate() {
         let own: Vec<Vec<&Draw>> = all
@@ -289,7 +355,7 @@ pub fn summarise(spaces: &[ParamSpace], states: &[ChainState], facts: RunFacts) 
         if top.is_finite() {
             *laplace_models
                 .entry(space.model.name().to_string())
-                .or_insert(0.0) += (facts.log_evidence[index] - top).exp() / evidence_sum;
+                .or_insert(0.0) += (log_evidence[index] - top).exp() / evidence_sum;
         }
         if space.diffuse {
             diffuse_share += probability;
@@ -305,10 +371,13 @@ pub fn summarise(spaces: &[ParamSpace], states: &[ChainState], facts: RunFacts) 
     }
     let mut within = Counts::default();
     let mut between = Counts::default();
+    let mut between_modes = Counts::default();
     for s in states {
         within.add(s.within);
         between.add(s.between);
+        between_modes.add(s.between_modes);
     }
+    let modes = summarise_modes(spaces, &all.concat(), &facts.modes);
     Posterior {
         params,
         models,
@@ -321,9 +390,11 @@ pub fn summarise(spaces: &[ParamSpace], states: &[ChainState], facts: RunFacts) 
         samples,
         laplace_models,
         per_model,
+        modes,
         acceptance: Acceptance {
             within_model: within.rate(),
             between_models: between.rate(),
+            between_modes: between_modes.rate(),
         },
         sampler: facts.sampler.to_string(),
         chains: states.len(),
@@ -387,6 +458,7 @@ mod tests {
                 adapted: vec![0; 3],
                 within: Counts::default(),
                 between: Counts::default(),
+                between_modes: Counts::default(),
                 iterations: 16,
                 draws,
             })
@@ -403,7 +475,16 @@ mod tests {
             noise,
             model_error: BTreeMap::new(),
             pixels: 1,
-            log_evidence: vec![0.0, 0.0, 2.0f64.ln()],
+            // One mode per candidate with Laplace evidence 1, 1 and 2.
+            modes: [0.0, 0.0, 2.0f64.ln()]
+                .map(|log_evidence| {
+                    vec![Laplace {
+                        mean: vec![0.0],
+                        precision: crate::fit::cholesky::Cholesky::new(&[1.0], 1).unwrap(),
+                        log_density: log_evidence - 0.5 * (2.0 * std::f64::consts::PI).ln(),
+                    }]
+                })
+                .to_vec(),
             map_seconds: 0.0,
             seconds: 1.0,
         };
@@ -413,6 +494,7 @@ mod tests {
         assert_eq!(p.diffuse_probability, Some(0.25));
         assert_eq!(p.per_model["single+diffuse"].samples, 8);
         assert!((p.laplace_models["kulla-conty"] - 0.5).abs() < 1e-12);
+        assert!(p.modes.is_empty());
         let ParamSummary::Scalar(alpha) = &p.params["alpha"] else {
             panic!()
         };

@@ -4,12 +4,19 @@
 //! | move | proposal | acceptance |
 //! | --- | --- | --- |
 //! | within model `m` | `x' = x + h^2/2 S g(x) + h R^-T xi`, `xi ~ N(0, I)`, `S = H^-1` of the model's [`Laplace`] approximation, `g = grad ln p` (Roberts and Tweedie 1996; Girolami and Calderhead 2011, eq. 9, constant metric) | `p(x') q(x given x') / (p(x) q(x' given x))` |
-//! | between models | `m'` uniform among the other candidates; `z = R_m^T (x - mu_m)`, padded with `u ~ N(0, I)` or cut to the new dimension, `x' = mu_m' + R_m'^-T z'` (Green 1995; the Laplace-matched jump of Hastie and Green 2012, section 3) | `p_m'(x') / p_m(x) * det(R_m) / det(R_m')`, times `N(u)` of the dropped and divided by `N(u)` of the drawn standard coordinates |
+//! | between modes of one model | from the mode `i` nearest to `x` ([`Laplace::nearest`]), mode `j` uniform among the others; `x' = mu_j + R_j^-T R_i^T (x - mu_i)` (a deterministic Laplace-matched jump between modes, after the mode-jumping proposals of Tjelmeland and Hegstad 2001) | `p_m(x') / p_m(x) * det(R_i) / det(R_j)` if `j` is the mode nearest to `x'` (so the reverse jump is proposed with the same probability), else rejected |
+//! | between models | `m'` uniform among the other candidates; `z = R_m^T (x - mu_m)`, padded with `u ~ N(0, I)` or cut to the new dimension, `x' = mu_m' + R_m'^-T z'`, through each model's first mode (Green 1995; the Laplace-matched jump of Hastie and Green 2012, section 3) | `p_m'(x') / p_m(x) * det(R_m) / det(R_m')`, times `N(u)` of the dropped and divided by `N(u)` of the drawn standard coordinates |
 //!
 //! Model priors are uniform over the candidates (so `p_m` is the unnormalised joint density of
-//! data and parameters under model `m`). Each iteration makes one within-model and, with more
-//! than one candidate, one between-model move.
+//! data and parameters under model `m`). Each iteration makes one within-model move, with more
+//! than one mode one between-mode move, and with more than one candidate one between-model move.
 //!
+//! Modes: a candidate may carry Laplace approximations at several modes of its density (the
+//! basins the point fit found, [`crate::fit::point::Alternative`]); MALA alone would stay in
+//! the basin it starts in. MALA is preconditioned by the mode nearest to its current point, and
+//! its reverse proposal by the mode nearest to the proposed one (with the normalisers of both
+//! proposal densities), so the metric depends on the point and the move stays reversible.
+
 //! Step size `h` per model and chain: during warm-up `ln h += (a - 0.574) / (t + 3)^0.6` after
 //! each within-model move with acceptance probability `a` (Robbins-Monro toward the optimal MALA
 //! acceptance of Roberts and Rosenthal 1998), then frozen, so the kept draws come from a
@@ -46,10 +53,18 @@ pub trait Target: Sync {
     fn gradient(&self, x: &[f64]) -> Vec<f64>;
 }
 
-/// One candidate model of the product space: its density and its Laplace approximation.
+/// One candidate model of the product space: its density and its Laplace approximations, at
+/// its MAP first and then at any other mode.
 pub struct Candidate<'t> {
     pub target: &'t dyn Target,
-    pub laplace: Laplace,
+    pub modes: Vec<Laplace>,
+}
+
+impl Candidate<'_> {
+    /// The approximation at the MAP: the one between-model jumps use.
+    pub fn laplace(&self) -> &Laplace {
+        &self.modes[0]
+    }
 }
 
 /// A kept draw.
@@ -96,6 +111,8 @@ pub struct ChainState {
     pub adapted: Vec<u64>,
     pub within: Counts,
     pub between: Counts,
+    #[serde(default)]
+    pub between_modes: Counts,
     /// Completed iterations (warm-up included).
     pub iterations: u64,
     pub draws: Vec<Draw>,
@@ -125,12 +142,14 @@ fn normals(rng: &mut Rng, n: usize) -> Vec<f64> {
     (0..n).map(|_| rng.sample(StandardNormal)).collect()
 }
 
-/// Start of chain `chain`: model `chain mod candidates`, a draw from that model's Laplace
-/// approximation with its standard deviation multiplied by `dispersion`.
+/// Start of chain `chain`: model `chain mod candidates`, its mode `(chain / candidates) mod
+/// modes`, a draw from that mode's Laplace approximation with its standard deviation multiplied
+/// by `dispersion`.
 pub fn start(candidates: &[Candidate], chain: usize, seed: u64, dispersion: f64) -> ChainState {
     let model = chain % candidates.len();
+    let mode = (chain / candidates.len()) % candidates[model].modes.len();
     let mut rng = rng(seed, chain, u64::MAX >> 24);
-    let laplace = &candidates[model].laplace;
+    let laplace = &candidates[model].modes[mode];
     let z: Vec<f64> = normals(&mut rng, laplace.dim())
         .iter()
         .map(|v| v * dispersion)
@@ -145,12 +164,15 @@ pub fn start(candidates: &[Candidate], chain: usize, seed: u64, dispersion: f64)
         adapted: vec![0; candidates.len()],
         within: Counts::default(),
         between: Counts::default(),
+        between_modes: Counts::default(),
         iterations: 0,
         draws: Vec::new(),
     }
 }
 
-/// `ln q(to given from)` of the MALA proposal, up to a constant shared by both directions.
+/// `ln q(to given from)` of the MALA proposal preconditioned by `laplace`, up to its normaliser
+/// (`ln det R - d ln h` plus a constant, which the caller adds when the two directions' metrics
+/// differ).
 fn mala_log_proposal(laplace: &Laplace, from: &[f64], gradient: &[f64], to: &[f64], h: f64) -> f64 {
     let drift = laplace.precision.solve(gradient);
     let offset: Vec<f64> = (0..from.len())
@@ -162,7 +184,7 @@ fn mala_log_proposal(laplace: &Laplace, from: &[f64], gradient: &[f64], to: &[f6
 
 /// One within-model MALA move; returns the acceptance probability.
 fn mala_move(candidate: &Candidate, state: &mut ChainState, rng: &mut Rng) -> (f64, bool) {
-    let laplace = &candidate.laplace;
+    let laplace = &candidate.modes[Laplace::nearest(&candidate.modes, &state.x)];
     let h = state.step[state.model];
     let gradient = state
         .gradient
@@ -182,9 +204,13 @@ fn mala_move(candidate: &Candidate, state: &mut ChainState, rng: &mut Rng) -> (f
         return (0.0, false);
     }
     let proposal_gradient = candidate.target.gradient(&proposal);
-    let log_ratio = proposal_density - state.log_density
-        + mala_log_proposal(laplace, &proposal, &proposal_gradient, &state.x, h)
+    let back = &candidate.modes[Laplace::nearest(&candidate.modes, &proposal)];
+    let mut log_ratio = proposal_density - state.log_density
+        + mala_log_proposal(back, &proposal, &proposal_gradient, &state.x, h)
         - mala_log_proposal(laplace, &state.x, &gradient, &proposal, h);
+    if !std::ptr::eq(back, laplace) {
+        log_ratio += laplace.log_det_sqrt_covariance() - back.log_det_sqrt_covariance();
+    }
     let accept_probability = if log_ratio.is_nan() {
         0.0
     } else {
@@ -201,21 +227,52 @@ fn mala_move(candidate: &Candidate, state: &mut ChainState, rng: &mut Rng) -> (f
     }
 }
 
+/// Uniformly one of `0..n` other than `current`.
+fn other_than(current: usize, n: usize, rng: &mut Rng) -> usize {
+    let pick = rng.random_range(0..n - 1);
+    if pick >= current {
+        pick + 1
+    } else {
+        pick
+    }
+}
+
+/// One between-mode move within the current model; returns whether it was accepted.
+fn mode_jump_move(candidate: &Candidate, state: &mut ChainState, rng: &mut Rng) -> bool {
+    let modes = &candidate.modes;
+    let from_mode = Laplace::nearest(modes, &state.x);
+    let to_mode = other_than(from_mode, modes.len(), rng);
+    let (from, to) = (&modes[from_mode], &modes[to_mode]);
+    let x = to.from_standard(&from.to_standard(&state.x));
+    let density = candidate.target.log_density(&x);
+    let log_ratio =
+        density - state.log_density + to.log_det_sqrt_covariance() - from.log_det_sqrt_covariance();
+    let u: f64 = rng.random();
+    let accepted =
+        density.is_finite() && u.ln() < log_ratio && Laplace::nearest(modes, &x) == to_mode;
+    if accepted {
+        state.x = x;
+        state.log_density = density;
+        state.gradient = None;
+    }
+    accepted
+}
+
 /// One between-model move; returns whether it was accepted.
 fn jump_move(candidates: &[Candidate], state: &mut ChainState, rng: &mut Rng) -> bool {
-    let others = candidates.len() - 1;
-    let pick = rng.random_range(0..others);
-    let target_model = if pick >= state.model { pick + 1 } else { pick };
-    let (from, to) = (&candidates[state.model], &candidates[target_model]);
-    let mut z = from.laplace.to_standard(&state.x);
+    let target_model = other_than(state.model, candidates.len(), rng);
+    let (from, to) = (
+        candidates[state.model].laplace(),
+        candidates[target_model].laplace(),
+    );
+    let mut z = from.to_standard(&state.x);
     let log_normal = |u: &[f64]| {
         -u.iter()
             .map(|v| 0.5 * v * v + 0.5 * (2.0 * std::f64::consts::PI).ln())
             .sum::<f64>()
     };
-    let mut log_ratio =
-        to.laplace.log_det_sqrt_covariance() - from.laplace.log_det_sqrt_covariance();
-    let (d_from, d_to) = (from.laplace.dim(), to.laplace.dim());
+    let mut log_ratio = to.log_det_sqrt_covariance() - from.log_det_sqrt_covariance();
+    let (d_from, d_to) = (from.dim(), to.dim());
     if d_to > d_from {
         let u = normals(rng, d_to - d_from);
         log_ratio -= log_normal(&u);
@@ -224,8 +281,8 @@ fn jump_move(candidates: &[Candidate], state: &mut ChainState, rng: &mut Rng) ->
         log_ratio += log_normal(&z[d_to..]);
         z.truncate(d_to);
     }
-    let x = to.laplace.from_standard(&z);
-    let density = to.target.log_density(&x);
+    let x = to.from_standard(&z);
+    let density = candidates[target_model].target.log_density(&x);
     log_ratio += density - state.log_density;
     let u: f64 = rng.random();
     let accepted = density.is_finite() && u.ln() < log_ratio;
@@ -255,6 +312,12 @@ pub fn advance(
         state.adapted[model] += 1;
     } else {
         state.within.record(accepted);
+    }
+    if candidates[model].modes.len() > 1 {
+        let jumped = mode_jump_move(&candidates[model], state, &mut rng);
+        if !warming {
+            state.between_modes.record(jumped);
+        }
     }
     if candidates.len() > 1 {
         let jumped = jump_move(candidates, state, &mut rng);
@@ -365,7 +428,7 @@ mod tests {
         laplace.precision = crate::fit::cholesky::Cholesky::new(&[0.5, 0.0, 0.0, 2.0], 2).unwrap();
         let candidates = [Candidate {
             target: &target,
-            laplace,
+            modes: vec![laplace],
         }];
         let schedule = Schedule {
             chains: 4,
@@ -412,6 +475,82 @@ mod tests {
         }
     }
 
+    /// `w N(x; -3, 0.5^2) + (1 - w) N(x; 4, 1)` in one dimension: two modes far apart.
+    struct TwoModes {
+        w: f64,
+    }
+
+    impl TwoModes {
+        fn parts(&self, x: f64) -> [(f64, f64); 2] {
+            // (weighted density, its derivative) of each component.
+            [(self.w, -3.0, 0.5), (1.0 - self.w, 4.0, 1.0)].map(|(w, m, s)| {
+                let d = w * (-0.5 * ((x - m) / s).powi(2)).exp()
+                    / (s * (2.0 * std::f64::consts::PI).sqrt());
+                (d, -d * (x - m) / (s * s))
+            })
+        }
+    }
+
+    impl Target for TwoModes {
+        fn dim(&self) -> usize {
+            1
+        }
+        fn log_density(&self, x: &[f64]) -> f64 {
+            self.parts(x[0]).iter().map(|p| p.0).sum::<f64>().ln()
+        }
+        fn gradient(&self, x: &[f64]) -> Vec<f64> {
+            let p = self.parts(x[0]);
+            vec![(p[0].1 + p[1].1) / (p[0].0 + p[1].0)]
+        }
+    }
+
+    #[test]
+    fn jumps_between_modes_weigh_two_basins_by_their_mass() {
+        let target = TwoModes { w: 0.3 };
+        let left = Laplace::at_mode(&target, &[-2.9]);
+        let right = Laplace::at_mode(&target, &[4.1]);
+        let schedule = Schedule {
+            chains: 4,
+            warmup: 300,
+            samples: 3000,
+            seed: 11,
+        };
+        let share_left = |modes: Vec<Laplace>| {
+            let candidates = [Candidate {
+                target: &target,
+                modes,
+            }];
+            let states = sample(&candidates, &schedule);
+            let indicator: Vec<Vec<f64>> = states
+                .iter()
+                .map(|s| {
+                    s.draws
+                        .iter()
+                        .map(|d| (d.x[0] < 0.5) as u8 as f64)
+                        .collect()
+                })
+                .collect();
+            let ess = bulk_ess(&indicator);
+            let all = indicator.concat();
+            (all.iter().sum::<f64>() / all.len() as f64, ess)
+        };
+        // With both modes the chains visit each in proportion to its mass, 0.3 on the left:
+        // binomial standard error with the indicator's ESS, 4 sigma.
+        let (p, ess) = share_left(vec![left.clone(), right.clone()]);
+        assert!(ess > 500.0, "ESS {ess}");
+        assert!(
+            (p - 0.3).abs() < 4.0 * (0.21 / ess).sqrt(),
+            "p(left) {p}, ESS {ess}"
+        );
+        // Without the jumps MALA rarely crosses the barrier between them (6 nats high at
+        // x = 0.5), and the shares are far off.
+        for (only, starts_left) in [(left, true), (right, false)] {
+            let (p, _) = share_left(vec![only]);
+            assert!((p - 0.3).abs() > 0.2, "one mode, p(left) {p}");
+            assert_eq!(p > 0.3, starts_left);
+        }
+    }
+
     #[test]
     fn model_probabilities_follow_the_evidence_across_dimensions() {
         // Model A: 2-D Gaussian with integral e^0 * 2 pi sd1 sd2; model B: 3-D with a different
@@ -435,19 +574,20 @@ mod tests {
         };
         let candidates = [
             Candidate {
-                laplace: Laplace::at_mode(&a, &[0.1, 0.9]),
+                modes: vec![Laplace::at_mode(&a, &[0.1, 0.9])],
                 target: &a,
             },
             Candidate {
-                laplace: Laplace::at_mode(&b, &[0.4, 1.2, -0.8]),
+                modes: vec![Laplace::at_mode(&b, &[0.4, 1.2, -0.8])],
                 target: &b,
             },
         ];
         // The Laplace evidence is exact for Gaussians.
         let laplace_b = 1.0
             / (1.0
-                + (candidates[0].laplace.log_evidence() - candidates[1].laplace.log_evidence())
-                    .exp());
+                + (candidates[0].laplace().log_evidence()
+                    - candidates[1].laplace().log_evidence())
+                .exp());
         assert!((laplace_b - 0.7).abs() < 1e-6, "{laplace_b}");
         let schedule = Schedule {
             chains: 4,

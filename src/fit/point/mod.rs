@@ -503,7 +503,7 @@ fn fit_level_on(
 }
 
 /// Two optima whose roughness differs by less than this (in `ln alpha`, 5%) are one basin.
-const DISTINCT_LN_ALPHA: f64 = 0.05;
+pub const DISTINCT_LN_ALPHA: f64 = 0.05;
 
 /// An optimum of another basin whose loss is within this factor of the chosen one's is
 /// reported: the photos hardly separate the two (on `heitz` flash photos of gold at alpha 0.8,
@@ -526,6 +526,9 @@ pub struct Alternative {
     /// The photos whose losses differ most between the two optima, with this optimum's loss
     /// over the fit's on each.
     pub separating_photos: Vec<(String, f64)>,
+    /// The optimum's coordinates in the fit's space: where `--mcmc` approximates this mode.
+    #[serde(skip)]
+    pub point: Vec<f64>,
 }
 
 impl Alternative {
@@ -590,6 +593,7 @@ fn alternatives(
             loss: other,
             loss_ratio: other / loss,
             separating_photos: ratios,
+            point: x,
         });
     }
     found
