@@ -6,11 +6,11 @@
 //! Group `bounce_cap`: the stochastic models at alpha 0.3 and 1.0 on the same pairs, free and
 //! limited to the reflections the render plan's `bounce-cap` chooses at that roughness.
 
-use bouncefit::albedo::rng_stream;
 use bouncefit::bsdf::bounce_tails::BounceTails;
 use bouncefit::bsdf::{BounceCap, Brdf, Model};
 use bouncefit::material::{FresnelSpec, Material};
 use bouncefit::microfacet::{Height, NdfKind};
+use bouncefit::random::rng_stream;
 use bouncefit::render::plan::BOUNCE_TOLERANCE;
 use bouncefit::scalar::Vec3;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};

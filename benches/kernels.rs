@@ -3,10 +3,10 @@
 //! configurations per iteration; criterion reports the time of the whole set, so divide by 1024
 //! for the time per call.
 
-use bouncefit::albedo::rng_stream;
 use bouncefit::bsdf::single::SingleBounce;
 use bouncefit::microfacet::fresnel::conductor;
 use bouncefit::microfacet::{Fresnel, Height, Microfacet, NdfKind};
+use bouncefit::random::rng_stream;
 use bouncefit::scalar::{Rgb, Vec3};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rand::Rng;

@@ -12,32 +12,15 @@
 //! over-estimates it under stratification). [`mean_value`] is the plain mean of repeated
 //! evaluations at one pair of directions, the estimate the stress sweep and the bench compare.
 
-use crate::bsdf::{Brdf, Rng};
+use crate::bsdf::Brdf;
+use crate::random::{rng_stream, Estimate, Moments, Rng};
 use crate::scalar::Vec3;
-use rand::{Rng as _, SeedableRng};
+use rand::Rng as _;
 use rayon::prelude::*;
 
-/// A value per channel with its error bar.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct Estimate {
-    pub value: [f64; 3],
-    /// Standard error of the mean (stochastic models) or quadrature error estimate (analytic).
-    pub stderr: [f64; 3],
-    pub samples: usize,
-}
-
-/// Independent random stream `stream` of the run seeded by `seed`, the same whatever the thread
-/// count (SplitMix64 finaliser of the pair, Steele et al. 2014).
-pub fn rng_stream(seed: u64, stream: u64) -> Rng {
-    let mut z = seed ^ stream.wrapping_add(1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    Rng::seed_from_u64(z ^ (z >> 31))
-}
-
 /// Mean of `n` evaluations of `f(wi, wo)` per channel, with the standard error of that mean
-/// (infinite for `n < 2`): a stochastic model's estimate of its value at one pair of
-/// directions, or an analytic model's value (standard error 0 up to rounding).
+/// ([`Moments`]; infinite for `n < 2`): a stochastic model's estimate of its value at one pair
+/// of directions, or an analytic model's value ([`Estimate::exact`]).
 pub fn mean_value(
     brdf: &dyn Brdf,
     wi: Vec3<f64>,
@@ -45,27 +28,14 @@ pub fn mean_value(
     n: usize,
     rng: &mut Rng,
 ) -> Estimate {
-    let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
+    let mut moments = Moments::default();
     for _ in 0..n {
-        let v = brdf.eval(wi, wo, rng).total();
-        for c in 0..3 {
-            sum[c] += v[c];
-            sum2[c] += v[c] * v[c];
-        }
+        moments.push(brdf.eval(wi, wo, rng).total());
     }
-    let nf = n as f64;
-    let value = sum.map(|s| s / nf);
-    let stderr = [0, 1, 2].map(|c| {
-        if n > 1 {
-            ((sum2[c] / nf - value[c] * value[c]).max(0.0) / (nf - 1.0)).sqrt()
-        } else {
-            f64::INFINITY
-        }
-    });
-    Estimate {
-        value,
-        stderr,
-        samples: n,
+    if brdf.is_stochastic() {
+        moments.estimate()
+    } else {
+        Estimate::exact(moments.mean(), n)
     }
 }
 
@@ -113,37 +83,25 @@ fn midpoint_grid(brdf: &dyn Brdf, wi: Vec3<f64>, n: usize, seed: u64) -> [f64; 3
 }
 
 fn stratified_monte_carlo(brdf: &dyn Brdf, wi: Vec3<f64>, n: usize, seed: u64) -> Estimate {
-    let rows: Vec<([f64; 3], [f64; 3])> = (0..n)
+    let rows: Vec<Moments<3>> = (0..n)
         .into_par_iter()
         .map(|j| {
             let mut rng = rng_stream(seed, j as u64);
-            let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
+            let mut row = Moments::default();
             for i in 0..n {
                 let u = [
                     (i as f64 + rng.random::<f64>()) / n as f64,
                     (j as f64 + rng.random::<f64>()) / n as f64,
                 ];
-                if let Some(s) = brdf.sample(wi, u, &mut rng) {
-                    for c in 0..3 {
-                        sum[c] += s.weight[c];
-                        sum2[c] += s.weight[c] * s.weight[c];
-                    }
-                }
+                // A direction the sampler cannot draw weighs 0.
+                row.push(brdf.sample(wi, u, &mut rng).map_or([0.0; 3], |s| s.weight));
             }
-            (sum, sum2)
+            row
         })
         .collect();
-    let total = (n * n) as f64;
-    let mean = [0, 1, 2].map(|c| rows.iter().map(|r| r.0[c]).sum::<f64>() / total);
-    let stderr = [0, 1, 2].map(|c| {
-        let m2 = rows.iter().map(|r| r.1[c]).sum::<f64>() / total;
-        ((m2 - mean[c] * mean[c]).max(0.0) / (total - 1.0)).sqrt()
-    });
-    Estimate {
-        value: mean,
-        stderr,
-        samples: n * n,
-    }
+    let mut all = Moments::default();
+    rows.iter().for_each(|row| all.merge(row));
+    all.estimate()
 }
 
 /// The adjoint of a BRDF, `f*(a, b) = f(b, a)` (Veach 1997, sec. 3.7.5). The albedo of a

@@ -25,6 +25,7 @@ pub mod maps;
 pub mod material;
 pub mod microfacet;
 pub mod progress;
+pub mod random;
 pub mod render;
 pub mod report;
 pub mod scalar;

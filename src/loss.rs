@@ -458,14 +458,8 @@ mod tests {
                 pair.push(loss.pair_value(&a, &b) - truth);
                 single.push(loss.value(&a) - truth);
             }
-            let mean_and_se = |v: &[f64]| {
-                let n = v.len() as f64;
-                let m = v.iter().sum::<f64>() / n;
-                let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
-                (m, (var / n).sqrt())
-            };
-            let (pm, pse) = mean_and_se(&pair);
-            let (sm, sse) = mean_and_se(&single);
+            let (pm, pse) = crate::random::mean_and_standard_error(&pair);
+            let (sm, sse) = crate::random::mean_and_standard_error(&single);
             assert!(pm.abs() < 4.0 * pse, "{kind:?}: pair bias {pm} +- {pse}");
             assert!(sm > 20.0 * sse, "{kind:?}: single bias {sm} +- {sse}");
         }

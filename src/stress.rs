@@ -36,10 +36,12 @@ pub mod batch;
 
 use crate::render::batch::Precision;
 
-use crate::albedo::{directional_albedo, mean_value, rng_stream, Adjoint};
+use crate::albedo::{directional_albedo, mean_value, Adjoint};
+
 use crate::bsdf::{differentiable, BounceCap, Brdf, Model};
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::{Height, NdfKind};
+use crate::random::rng_stream;
 use crate::scalar::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;

@@ -1151,7 +1151,6 @@ fn maps_exports_carry_each_texels_anisotropic_roughness() {
     let packed = png_texels(&folder.join("metallic_roughness.png"));
     let anisotropy = png_texels(&folder.join("anisotropy.png"));
     for t in 0..8 {
-        let [ax, ay] = alpha[t];
         let r2 = packed[t][1].powi(2);
         let (direction, strength) = (
             [0, 1].map(|i| 2.0 * anisotropy[t][i] - 1.0),

@@ -19,10 +19,12 @@
 //! its numbers do not depend on which other models run or on the thread count.
 
 use super::cpu_time::thread_seconds;
-use crate::albedo::{mean_value, rng_stream, Estimate};
+use crate::albedo::mean_value;
+
 use crate::bsdf::{Brdf, Model};
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::{Height, NdfKind};
+use crate::random::{rng_stream, Estimate};
 use crate::scalar::Vec3;
 use rand::Rng as _;
 use rayon::prelude::*;
@@ -207,7 +209,7 @@ fn measure_config(
     config: &Configuration,
     reference_samples: usize,
     heitz: &Estimate,
-    rng: &mut crate::bsdf::Rng,
+    rng: &mut crate::random::Rng,
 ) -> ConfigMeasure {
     let (wi, wo) = (config.wi, config.wo);
     let converged = if brdf.is_stochastic() {

@@ -18,10 +18,10 @@
 
 use super::cpu_time::thread_seconds;
 use super::estimators::{configurations, COPPER};
-use crate::albedo::rng_stream;
 use crate::bsdf::Model;
 use crate::material::Material;
 use crate::microfacet::{Height, NdfKind};
+use crate::random::rng_stream;
 use crate::render::batch::{BatchRecords, Lobe, Precision};
 use crate::scalar::Vec3;
 use crate::shading::ShadingRecords;

@@ -46,8 +46,10 @@ use super::position_free::{
     connect, mis_pdf, scatter, signed_lambda, survival, walk_sample, MAX_WALK_BOUNCES,
 };
 use super::single::SingleBounce;
-use super::{BounceCap, Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
+use super::{BounceCap, Brdf, BrdfSample, BrdfValue, ScalarBrdf};
+
 use crate::microfacet::{Fresnel, Height, Microfacet};
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 use rand::Rng as _;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -562,11 +564,11 @@ pub(crate) mod tests {
     #![allow(clippy::needless_range_loop)] // channel loops over parallel arrays
 
     use super::*;
-    use crate::albedo::{rng_stream, Estimate};
     use crate::bsdf::cui::{segment_term, Cui};
     use crate::bsdf::position_free::checks::{assert_furnace, furnace};
     use crate::bsdf::testing::*;
     use crate::microfacet::NdfKind;
+    use crate::random::{rng_stream, Estimate, Moments};
     use std::sync::{Arc, Mutex};
 
     fn copper() -> Fresnel<f64> {
@@ -721,20 +723,12 @@ pub(crate) mod tests {
     fn p_exit_by_explicit_depths(l: &[f64], n: usize, seed: u64) -> Estimate {
         let mut rng = rng_stream(seed, 0);
         let k = l.len() - 1;
-        let (mut sum, mut sum2) = (0.0, 0.0);
+        let mut moments = Moments::default();
         for _ in 0..n {
             let (x, w) = explicit_depth(&l[..k], &mut rng);
-            let v = w * (-l[k] * x).exp();
-            sum += v;
-            sum2 += v * v;
+            moments.push([w * (-l[k] * x).exp(); 3]);
         }
-        let mean = sum / n as f64;
-        let se = ((sum2 / n as f64 - mean * mean).max(0.0) / (n as f64 - 1.0)).sqrt();
-        Estimate {
-            value: [mean; 3],
-            stderr: [se; 3],
-            samples: n,
-        }
+        moments.estimate()
     }
 
     #[test]

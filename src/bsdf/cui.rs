@@ -49,8 +49,10 @@ use super::position_free::{
     connect, mis_pdf, scatter, signed_lambda, survival, walk_sample, MAX_WALK_BOUNCES,
 };
 use super::single::SingleBounce;
-use super::{BounceCap, Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
+use super::{BounceCap, Brdf, BrdfSample, BrdfValue, ScalarBrdf};
+
 use crate::microfacet::{Fresnel, Height, Microfacet};
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 use rand::Rng as _;
 
@@ -354,7 +356,7 @@ mod tests {
             }
             s[0][n - 1]
         }
-        let mut rng = crate::albedo::rng_stream(3, 0);
+        let mut rng = crate::random::rng_stream(3, 0);
         use rand::Rng as _;
         for k in 1..=8 {
             for _ in 0..300 {

@@ -36,7 +36,9 @@
 
 use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
-use super::{Rng, ScalarBrdf};
+use super::ScalarBrdf;
+
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 use std::f64::consts::PI;
 

@@ -126,8 +126,10 @@
 //! renderer's MIS stays unbiased.
 
 use super::single::SingleBounce;
-use super::{BounceCap, Brdf, BrdfSample, BrdfValue, Rng};
+use super::{BounceCap, Brdf, BrdfSample, BrdfValue};
+
 use crate::microfacet::{Fresnel, Height, Microfacet};
+use crate::random::Rng;
 use crate::scalar::Vec3;
 use rand::Rng as _;
 use std::f64::consts::FRAC_1_PI;
@@ -492,11 +494,11 @@ mod tests {
     #![allow(clippy::needless_range_loop)] // channel loops over parallel arrays read best indexed
 
     use super::*;
-    use crate::albedo::{rng_stream, Estimate};
     use crate::bsdf::testing::*;
     use crate::bsdf::Model;
     use crate::material::{FresnelSpec, Material};
     use crate::microfacet::NdfKind;
+    use crate::random::{rng_stream, Estimate, Moments};
     use rayon::prelude::*;
 
     fn heitz(ndf: NdfKind, ax: f64, ay: f64, fresnel: FresnelSpec) -> Heitz {
@@ -516,23 +518,11 @@ mod tests {
     /// Mean and standard error of `n` independent runs of `estimate`, per channel.
     fn mean_of(n: usize, seed: u64, mut estimate: impl FnMut(&mut Rng) -> [f64; 3]) -> Estimate {
         let mut rng = rng_stream(seed, 7);
-        let (mut sum, mut sum2) = ([0.0; 3], [0.0; 3]);
+        let mut moments = Moments::default();
         for _ in 0..n {
-            let v = estimate(&mut rng);
-            for c in 0..3 {
-                sum[c] += v[c];
-                sum2[c] += v[c] * v[c];
-            }
+            moments.push(estimate(&mut rng));
         }
-        let nf = n as f64;
-        let value = sum.map(|s| s / nf);
-        let stderr =
-            [0, 1, 2].map(|c| ((sum2[c] / nf - value[c] * value[c]).max(0.0) / (nf - 1.0)).sqrt());
-        Estimate {
-            value,
-            stderr,
-            samples: n,
-        }
+        moments.estimate()
     }
 
     /// `|a - 1|` within 1% and within 3 standard errors (an exact 1 passes with zero error).

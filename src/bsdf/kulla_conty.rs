@@ -16,8 +16,10 @@
 use super::albedo_table::AlbedoTable;
 use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
-use super::{Rng, ScalarBrdf};
+use super::ScalarBrdf;
+
 use crate::microfacet::Fresnel;
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 
 /// 8-point Gauss-Legendre nodes and weights on [0, 1] (for `F_avg`).

@@ -8,7 +8,9 @@
 //! `u` carries over to the chosen technique.
 
 use super::single::SingleBounce;
-use super::{Brdf, BrdfSample, BrdfValue, Rng};
+use super::{Brdf, BrdfSample, BrdfValue};
+
+use crate::random::Rng;
 use crate::scalar::Vec3;
 use std::f64::consts::{FRAC_1_PI, PI};
 

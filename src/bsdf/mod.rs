@@ -42,11 +42,9 @@ mod tests;
 pub mod turquin;
 pub mod wang;
 
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 use serde::{Deserialize, Serialize};
-
-/// The random number generator every stochastic estimator draws from (deterministic per seed).
-pub type Rng = rand_pcg::Pcg64Mcg;
 
 /// Most reflections a path of a stochastic estimator may have (`heitz`, `bitterli`, `cui`,
 /// `wang-*`): a walk that would go past it is not continued, so paths of more reflections are

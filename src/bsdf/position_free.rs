@@ -185,11 +185,11 @@ mod tests {
 /// Test helpers shared by the `bitterli` and `cui` test modules.
 #[cfg(test)]
 pub(crate) mod checks {
-    use crate::albedo::Estimate;
     use crate::bsdf::single::SingleBounce;
     use crate::bsdf::testing::{albedo_by_eval, albedo_by_sampling, unit};
     use crate::bsdf::Brdf;
     use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
+    use crate::random::Estimate;
 
     /// One row of the white furnace table.
     #[derive(Debug)]

@@ -23,10 +23,10 @@
 //! correlated `wang-*`) are left out of the reciprocity properties.
 
 use super::{Brdf, Model};
-use crate::albedo::rng_stream;
 use crate::bsdf::testing::{mean_eval, z_score};
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::{Height, NdfKind};
+use crate::random::rng_stream;
 use crate::scalar::Vec3;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};

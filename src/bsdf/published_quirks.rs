@@ -34,11 +34,11 @@ fn two_bounce(
     wo_theta: f64,
     n: usize,
     seed: u64,
-) -> crate::albedo::Estimate {
+) -> crate::random::Estimate {
     let (wi, wo) = (unit(wi_theta, 0.0), unit(wo_theta, 180.0));
     let mut e = mean_eval(brdf, wi, wo, n, seed);
     let single = brdf
-        .eval(wi, wo, &mut crate::albedo::rng_stream(0, 0))
+        .eval(wi, wo, &mut crate::random::rng_stream(0, 0))
         .single;
     e.value = [0, 1, 2].map(|c| e.value[c] - single[c]);
     e

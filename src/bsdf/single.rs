@@ -14,8 +14,10 @@
 //! [`Microfacet::g2_over_cosines`] so it stays finite at grazing angles. Sampling draws `h` from
 //! the visible normals of `wi` (Heitz 2018), with weight `F G2 / G1(wi)`.
 
-use super::{Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
+use super::{Brdf, BrdfSample, BrdfValue, ScalarBrdf};
+
 use crate::microfacet::{Fresnel, Height, Microfacet};
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 
 /// The single-bounce model, generic over the scalar so the fitter can differentiate it.

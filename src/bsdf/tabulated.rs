@@ -32,7 +32,7 @@
 //! and mirror symmetry the backward walk from `wo` toward `wi` is the row of `theta_o` at the
 //! target (`theta_i`, `phi`), so `T(theta_i, theta_o, phi) = S(theta_i -> theta_o, phi) +
 //! S(theta_o -> theta_i, phi)`: unbiased (the same two strategies as `heitz`) and symmetric.
-//! Seeds are fixed ([`crate::albedo::rng_stream`] with seed [`SEED`], one stream per row).
+//! Seeds are fixed ([`crate::random::rng_stream`] with seed [`SEED`], one stream per row).
 //! Generation: `cargo test --release --lib regenerate_heitz_table -- --ignored` with
 //! `nice -n 10` and `RAYON_NUM_THREADS=1`: 421 s on one core (2^18 walks per row, both
 //! distributions). Relative standard error of the stored white multiple-bounce entries: median
@@ -70,8 +70,10 @@
 use super::albedo_table::{log_cell, AlbedoTable};
 use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
-use super::{Rng, ScalarBrdf};
+use super::ScalarBrdf;
+
 use crate::microfacet::{Height, NdfKind};
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 use std::sync::OnceLock;
 use vertex_fresnel::OrderFresnel;

@@ -7,10 +7,13 @@
 //! estimator and never on an unlucky run.
 
 use super::single::SingleBounce;
-use super::{Brdf, Rng};
-use crate::albedo::{directional_albedo, rng_stream, Estimate};
+use super::Brdf;
+
+use crate::albedo::{directional_albedo, mean_value};
+
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::{Height, Microfacet, NdfKind};
+use crate::random::{rng_stream, Estimate, Moments, Rng};
 use crate::scalar::Vec3;
 use rand::Rng as _;
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -49,57 +52,9 @@ pub fn ggx_material(model: super::Model, alpha: f64, fresnel: FresnelSpec) -> Ma
     }
 }
 
-/// Mean of `n` independent evaluations of `f(wi, wo)` with its standard error.
+/// Mean of `n` independent evaluations of `f(wi, wo)` with its standard error ([`mean_value`]).
 pub fn mean_eval(brdf: &dyn Brdf, wi: Vec3<f64>, wo: Vec3<f64>, n: usize, seed: u64) -> Estimate {
-    let mut rng = rng_stream(seed, 0);
-    let mut stats = Moments::default();
-    for _ in 0..n {
-        stats.push(brdf.eval(wi, wo, &mut rng).total());
-    }
-    stats.estimate()
-}
-
-/// Running mean and variance per channel, accumulated on values shifted by the first one: the
-/// constant exact single-bounce part would otherwise swamp the tiny multi-bounce fluctuations in
-/// `E[x^2] - E[x]^2` (a 1e-9 spread on top of 0.45 rounded to a zero variance).
-#[derive(Default)]
-pub struct Moments {
-    shift: Option<[f64; 3]>,
-    sum: [f64; 3],
-    sum2: [f64; 3],
-    n: usize,
-}
-
-impl Moments {
-    pub fn push(&mut self, x: [f64; 3]) {
-        let shift = *self.shift.get_or_insert(x);
-        for c in 0..3 {
-            let d = x[c] - shift[c];
-            self.sum[c] += d;
-            self.sum2[c] += d * d;
-        }
-        self.n += 1;
-    }
-
-    pub fn estimate(&self) -> Estimate {
-        let shift = self.shift.unwrap_or([0.0; 3]);
-        let nf = self.n.max(1) as f64;
-        let mean_shifted = self.sum.map(|s| s / nf);
-        let value = [0, 1, 2].map(|c| shift[c] + mean_shifted[c]);
-        let stderr = [0, 1, 2].map(|c| {
-            if self.n > 1 {
-                ((self.sum2[c] / nf - mean_shifted[c] * mean_shifted[c]).max(0.0) / (nf - 1.0))
-                    .sqrt()
-            } else {
-                0.0
-            }
-        });
-        Estimate {
-            value,
-            stderr,
-            samples: self.n,
-        }
-    }
+    mean_value(brdf, wi, wo, n, &mut rng_stream(seed, 0))
 }
 
 /// z-score of the difference of two estimates in channel `c` (0 when both are exact and equal).

@@ -5,9 +5,11 @@
 use super::single::SingleBounce;
 use super::testing::COPPER;
 use super::*;
-use crate::albedo::{directional_albedo, rng_stream};
+use crate::albedo::directional_albedo;
+
 use crate::material::FresnelSpec;
 use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
+use crate::random::rng_stream;
 use crate::scalar::Rgb;
 use rand::Rng as _;
 use std::f64::consts::PI;

@@ -16,7 +16,9 @@
 use super::albedo_table::AlbedoTable;
 use super::lobe_mixture::AddedLobe;
 use super::single::SingleBounce;
-use super::{Rng, ScalarBrdf};
+use super::ScalarBrdf;
+
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 
 #[derive(Clone, Copy)]

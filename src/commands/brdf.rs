@@ -1,9 +1,13 @@
 //! `bouncefit brdf` and `bouncefit albedo`: evaluate one model at one configuration.
 
 use super::{parse_direction, unit_direction, MaterialArgs};
-use crate::albedo::{directional_albedo, rng_stream};
-use crate::bsdf::{Brdf, Rng};
+use crate::albedo::directional_albedo;
+
+use crate::bsdf::Brdf;
+use crate::random::{rng_stream, Moments};
+
 use crate::error::{Error, Result};
+use crate::random::Rng;
 use crate::scalar::Vec3;
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -61,23 +65,19 @@ struct Estimate {
 
 /// Evaluate `f(wi, wo)`; stochastic models average `n` independent estimates.
 fn estimate(brdf: &dyn Brdf, wi: Vec3<f64>, wo: Vec3<f64>, n: usize, rng: &mut Rng) -> Estimate {
-    let (mut sum, mut sum2, mut single) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+    let (mut moments, mut single) = (Moments::default(), [0.0; 3]);
     for _ in 0..n {
         let v = brdf.eval(wi, wo, rng);
         single = v.single;
-        for c in 0..3 {
-            sum[c] += v.multi[c];
-            sum2[c] += v.multi[c] * v.multi[c];
-        }
+        moments.push(v.multi);
     }
-    let multi = sum.map(|s| s / n as f64);
-    let stderr = [0, 1, 2].map(|c| {
-        if n > 1 {
-            ((sum2[c] / n as f64 - multi[c] * multi[c]).max(0.0) / (n - 1) as f64).sqrt()
-        } else {
-            0.0
-        }
-    });
+    let multi = moments.mean();
+    // An analytic value is exact; one draw of a stochastic one has no error bar (JSON null).
+    let stderr = if brdf.is_stochastic() {
+        moments.standard_error()
+    } else {
+        [0.0; 3]
+    };
     Estimate {
         f: [0, 1, 2].map(|c| single[c] + multi[c]),
         single,

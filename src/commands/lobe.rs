@@ -3,9 +3,11 @@
 //! split by bounce count for a list of roughness values.
 
 use super::MaterialArgs;
-use crate::albedo::{albedo_by_bounce, rng_stream};
+use crate::albedo::albedo_by_bounce;
+
 use crate::error::{Error, Result};
 use crate::material::Material;
+use crate::random::rng_stream;
 use crate::scalar::Vec3;
 use rayon::prelude::*;
 use serde_json::json;

@@ -16,9 +16,9 @@
 //! `[c, c+1] x [r, r+1]`); `null` for a point behind a pinhole camera.
 
 use super::inputs::open_capture;
-use crate::albedo::rng_stream;
 use crate::capture::{Camera, Capture};
 use crate::error::Result;
+use crate::random::rng_stream;
 use glam::DVec3;
 use rand::Rng;
 use serde_json::{json, Value};

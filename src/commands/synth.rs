@@ -4,13 +4,13 @@
 use super::images::{display_exposure, write_photo_images};
 use super::inputs::{load_any_material, open_capture};
 use super::output::StagedFolder;
-use crate::albedo::rng_stream;
 use crate::capture::image_io::ColorEncoding;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::point::exposure::exposed_records;
 use crate::maps::render::render_any;
 use crate::maps::AnyMaterial;
+use crate::random::rng_stream;
 use crate::shading::ShadingRecords;
 use rand_distr::{Distribution, StandardNormal};
 use std::path::PathBuf;

@@ -35,11 +35,13 @@
 use super::{normal_from_slopes, MaterialMaps, ShadingFrame, TexelGrid};
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::tabulated::{LobeDirections, Tabulated};
-use crate::bsdf::{differentiable, BounceCap, Model, Rng, ScalarBrdf};
+use crate::bsdf::{differentiable, BounceCap, Model, ScalarBrdf};
+
 use crate::error::{Error, Result};
 use crate::fit::point::params::{logit, sigmoid, ParamSpace};
 use crate::material::{FresnelSpec, Material};
 use crate::progress::Progress;
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 use crate::shading::ShadingRecords;
 use nalgebra::{SMatrix, SVector};

@@ -1,7 +1,7 @@
 //! Tests of the microfacet kernel against independent quadrature and by histograms.
 
 use super::*;
-use crate::bsdf::Rng;
+use crate::random::Rng;
 use num_dual::Dual64;
 use rand::{Rng as _, SeedableRng};
 use std::f64::consts::PI;

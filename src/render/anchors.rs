@@ -472,7 +472,7 @@ impl ProxyLobes {
 
 /// The multiple-bounce value of `lobe` at `(wi, wo)`, channel 0.
 fn multiple(lobe: &dyn crate::bsdf::ScalarBrdf<f64>, wi: [f64; 3], wo: [f64; 3]) -> f64 {
-    let mut unused = crate::albedo::rng_stream(0, 0);
+    let mut unused = crate::random::rng_stream(0, 0);
     lobe.eval_multi(Vec3::from_f64(wi), Vec3::from_f64(wo), &mut unused)
         .0[0]
 }

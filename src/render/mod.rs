@@ -18,10 +18,10 @@ pub mod batch;
 pub mod plan;
 pub mod repeated;
 
-use crate::albedo::rng_stream;
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::ScalarBrdf;
 use crate::material::Material;
+use crate::random::rng_stream;
 use crate::scalar::{Real, Rgb, Vec3};
 use crate::shading::ShadingRecords;
 use plan::{MultiTerm, RenderPlan};
@@ -316,7 +316,7 @@ pub fn render_multi_streams(
 fn shared_values<T: Real>(
     repeated: &repeated::Repeated,
     seed: u64,
-    f: impl Fn(usize, &mut crate::bsdf::Rng) -> Rgb<T> + Sync,
+    f: impl Fn(usize, &mut crate::random::Rng) -> Rgb<T> + Sync,
 ) -> Vec<Rgb<T>> {
     repeated
         .firsts
@@ -334,7 +334,7 @@ pub(crate) fn accumulate<T: Real>(
     pixels: &[usize],
     diffuse: [T; 3],
     seed: u64,
-    f: impl Fn(usize, usize, &mut crate::bsdf::Rng) -> Rgb<T> + Sync,
+    f: impl Fn(usize, usize, &mut crate::random::Rng) -> Rgb<T> + Sync,
 ) -> Vec<[T; 3]> {
     let diffuse = diffuse.map(|d| d * T::c(FRAC_1_PI));
     let spp = records.samples_per_pixel;

@@ -24,9 +24,10 @@ pub mod plots;
 
 use crate::bsdf::Model;
 use crate::fit::bayes::posterior::{ParamSummary, Posterior as FitPosterior};
-use crate::fit::bayes::selection::{mean_and_standard_error, HeldOutRanking, Selection};
+use crate::fit::bayes::selection::{HeldOutRanking, Selection};
 use crate::fit::{edge_tint, ModelFit, TracePoint};
 use crate::loss::LossKind;
+use crate::random::mean_and_standard_error;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 

@@ -1,9 +1,9 @@
 //! The table's generator (`regenerate_heitz_table`, ignored) and the tests of `tabulated`.
 
 use super::*;
-use crate::albedo::rng_stream;
 use crate::bsdf::heitz::{Heitz, Target, Weighting};
 use crate::microfacet::{Fresnel, Microfacet};
+use crate::random::rng_stream;
 use rand::Rng as _;
 use rayon::prelude::*;
 use vertex_fresnel::{

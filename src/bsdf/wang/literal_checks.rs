@@ -3,8 +3,8 @@
 
 use super::tests::{surface, HEIGHTS, NDFS};
 use super::*;
-use crate::albedo::rng_stream;
 use crate::bsdf::testing::*;
+use crate::random::rng_stream;
 
 /// `rho = f(path)` of eq. 1 transcribed literally: vertex terms eq. 2, segment terms eq. 6-8
 /// and 11 (uncorrelated) or eq. 6, 11, 17-18, 22-23 (correlated), with `G1` of eq. 9-10

@@ -110,8 +110,10 @@
 
 use super::roulette::piecewise_constant;
 use super::single::SingleBounce;
-use super::{BounceCap, Brdf, BrdfSample, BrdfValue, Rng, ScalarBrdf};
+use super::{BounceCap, Brdf, BrdfSample, BrdfValue, ScalarBrdf};
+
 use crate::microfacet::{Height, Microfacet, NdfKind};
+use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 use rand::Rng as _;
 use std::f64::consts::FRAC_1_PI;

@@ -4,10 +4,10 @@
 #![allow(clippy::needless_range_loop)] // channel loops over parallel arrays read best indexed
 
 use super::*;
-use crate::albedo::{rng_stream, Estimate};
 use crate::bsdf::testing::*;
 use crate::material::FresnelSpec;
 use crate::microfacet::Fresnel;
+use crate::random::{rng_stream, Estimate, Moments};
 
 pub(super) const HEIGHTS: [Height; 2] = [Height::Uncorrelated, Height::Correlated];
 pub(super) const NDFS: [NdfKind; 2] = [NdfKind::Ggx, NdfKind::Beckmann];
@@ -151,17 +151,14 @@ fn single_plus_multi(m: &Wang, wi: Vec3<f64>, n: usize, seed: u64) -> (f64, f64,
     let quadrature = albedo_by_sampling(&m.surface, wi, 250_000, 1);
     let single = quadrature.value[0];
     let mut rng = rng_stream(seed, 0);
-    let (mut s1, mut s2) = (0.0, 0.0);
+    let mut moments = Moments::<1>::default();
     for _ in 0..n {
         let u: [f64; 2] = [rng.random(), rng.random()];
         let (r, phi) = (u[0].sqrt(), std::f64::consts::TAU * u[1]);
         let wo = Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u[0]).sqrt());
-        let x = m.eval(wi, wo, &mut rng).multi[0] * std::f64::consts::PI;
-        s1 += x;
-        s2 += x * x;
+        moments.push([m.eval(wi, wo, &mut rng).multi[0] * std::f64::consts::PI]);
     }
-    let multi = s1 / n as f64;
-    let se2 = (s2 / n as f64 - multi * multi) / (n - 1) as f64;
+    let (multi, se2) = (moments.mean()[0], moments.standard_error()[0].powi(2));
     (
         single,
         multi,

@@ -433,7 +433,7 @@ pub fn pixel_subset(records: &ShadingRecords, count: usize, seed: u64) -> Shadin
     if count == 0 || count >= used.len() {
         return subset;
     }
-    let mut rng = crate::albedo::rng_stream(seed, 0x5375_6273_6574);
+    let mut rng = crate::random::rng_stream(seed, 0x5375_6273_6574);
     let mut keep = vec![false; records.pixel_count()];
     for i in sample(&mut rng, used.len(), count) {
         keep[used[i]] = true;

@@ -35,8 +35,8 @@
 //! rest of the run, and a run resumed from a checkpoint repeats an uninterrupted one exactly.
 
 use super::laplace::Laplace;
-use crate::albedo::rng_stream;
-use crate::bsdf::Rng;
+use crate::random::rng_stream;
+use crate::random::Rng;
 use rand::Rng as _;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;

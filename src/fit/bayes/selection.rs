@@ -20,6 +20,7 @@
 //! photos) than between models on the same fold.
 
 use crate::bsdf::Model;
+use crate::random::mean_and_standard_error;
 use serde::Serialize;
 
 /// The mean squared residual is floored here so a perfect fit keeps a finite BIC.
@@ -200,20 +201,6 @@ fn bic_verdict(preferred: Model, candidates: &[Candidate]) -> String {
     )
 }
 
-/// Mean and standard error of the mean of a sample (standard error 0 for fewer than 2 values).
-pub fn mean_and_standard_error(values: &[f64]) -> (f64, f64) {
-    let n = values.len() as f64;
-    if values.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let mean = values.iter().sum::<f64>() / n;
-    if values.len() < 2 {
-        return (mean, 0.0);
-    }
-    let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    (mean, (variance / n).sqrt())
-}
-
 /// Held-out losses of one model, one per fold (the same folds for every model).
 #[derive(Clone, Debug)]
 pub struct HeldOutErrors {
@@ -377,15 +364,6 @@ mod tests {
             "{}",
             s.verdict
         );
-    }
-
-    #[test]
-    fn mean_and_standard_error_match_the_textbook_values() {
-        let (mean, se) = mean_and_standard_error(&[1.0, 2.0, 3.0, 4.0]);
-        assert_eq!(mean, 2.5);
-        // sample variance 5/3, se = sqrt(5/3 / 4)
-        assert!((se - (5.0f64 / 12.0).sqrt()).abs() < 1e-15);
-        assert_eq!(mean_and_standard_error(&[7.0]), (7.0, 0.0));
     }
 
     #[test]

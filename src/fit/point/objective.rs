@@ -45,7 +45,7 @@ const FD_STEP: f64 = 1e-5;
 const MAX_EXACT_DIM: usize = 11;
 
 /// Mixed into the seed for the second render of a stochastic model: its per-pixel streams
-/// ([`crate::albedo::rng_stream`]) are then independent of the first render's.
+/// ([`crate::random::rng_stream`]) are then independent of the first render's.
 const SECOND_RENDER_STREAMS: u64 = 0xD1B5_4A32_D192_ED03;
 
 /// Weight of the pull back of a point outside the space's box, in normalised cost units per

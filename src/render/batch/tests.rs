@@ -14,8 +14,8 @@ use rand::{Rng as _, SeedableRng};
 /// grazing (z below 1e-3), some with no light and some with a direction below the horizon.
 fn random_records(pixels: usize, seed: u64) -> ShadingRecords {
     let spp = 4;
-    let mut rng = crate::bsdf::Rng::seed_from_u64(seed);
-    let direction = |rng: &mut crate::bsdf::Rng| {
+    let mut rng = crate::random::Rng::seed_from_u64(seed);
+    let direction = |rng: &mut crate::random::Rng| {
         let mut w = random_upper(rng);
         if rng.random::<f64>() < 0.25 {
             let z = rng.random::<f64>() * 1e-3;

@@ -76,7 +76,7 @@ fn assert_gradients_agree(what: &str, exact: &[f64], fd: &[f64]) {
 }
 
 /// A random point: ln alpha in ln [0.05, 1], logits in [-2, 2].
-fn random_point(space: &ParamSpace, rng: &mut crate::bsdf::Rng) -> Vec<f64> {
+fn random_point(space: &ParamSpace, rng: &mut crate::random::Rng) -> Vec<f64> {
     let alphas = if space.anisotropic { 2 } else { 1 };
     (0..space.dim())
         .map(|i| {
@@ -92,7 +92,7 @@ fn random_point(space: &ParamSpace, rng: &mut crate::bsdf::Rng) -> Vec<f64> {
 /// Every combination the issue lists for `model`: GGX and Beckmann, Schlick and conductor, with
 /// diffuse (and one anisotropic conductor space, the 11-dimensional case), 5 points each.
 fn check_model(model: Model) {
-    let mut rng = crate::bsdf::Rng::seed_from_u64(11);
+    let mut rng = crate::random::Rng::seed_from_u64(11);
     for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
         for (fresnel, anisotropic) in [
             (FresnelFamily::Schlick, false),
@@ -235,7 +235,7 @@ fn single_bounce_derivative_in_ln_alpha_matches_the_hand_derivation() {
 /// derivatives of its two renders.
 fn check_pathwise(model: Model) {
     const H: f64 = 1e-6;
-    let mut rng = crate::bsdf::Rng::seed_from_u64(23);
+    let mut rng = crate::random::Rng::seed_from_u64(23);
     let (mut compared, mut flips) = (0usize, 0usize);
     for ndf in [NdfKind::Ggx, NdfKind::Beckmann] {
         for fresnel in [FresnelFamily::Schlick, FresnelFamily::Conductor] {
@@ -384,7 +384,7 @@ fn batch_split_renders_equal_the_generic_render_path() {
             exposure: true,
             ..ParamSpace::plain(model)
         };
-        let mut rng = crate::bsdf::Rng::seed_from_u64(5);
+        let mut rng = crate::random::Rng::seed_from_u64(5);
         let x = random_point(&space, &mut rng);
         let truth = space.material(&x);
         let records = pinhole_records(&truth);
@@ -445,7 +445,7 @@ fn batch_split_renders_equal_the_generic_render_path() {
 /// residuals' terms, and the gradient is the exact path's.
 #[test]
 fn gauss_newton_matrix_is_the_hessian_at_a_perfect_fit() {
-    let mut rng = crate::bsdf::Rng::seed_from_u64(23);
+    let mut rng = crate::random::Rng::seed_from_u64(23);
     let known = crate::material::FresnelSpec::Schlick {
         f0: [0.9, 0.6, 0.5],
     };
