@@ -449,7 +449,9 @@ pub fn fit_and_sample(
     };
     // On a subset of the pixels the chains' MAP fits may miss a basin that the fits on every
     // pixel find, so those come first and hand the sampler their other basins as modes.
-    let mut fits = if mcmc.mcmc && mcmc.mcmc_pixels != 0 && !mcmc.resume {
+    let loss_pixels = records.weight.iter().filter(|w| **w > 0.0).count();
+    let subset = mcmc.mcmc_pixels != 0 && mcmc.mcmc_pixels < loss_pixels;
+    let mut fits = if mcmc.mcmc && subset && !mcmc.resume {
         models
             .iter()
             .map(|&model| fit_and_print(model))
