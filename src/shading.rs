@@ -13,6 +13,7 @@
 //! (radiance of a pixel).
 
 mod pyramid;
+pub mod region;
 
 use glam::DVec3;
 use rayon::prelude::*;

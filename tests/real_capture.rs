@@ -7,10 +7,10 @@ mod common;
 
 use bouncefit::capture::image_io::{load_image, ColorEncoding, LinearImage};
 use bouncefit::capture::materialgan_writer;
-use bouncefit::capture::region::pixel_points;
 use bouncefit::capture::Capture;
 use bouncefit::material::Material;
 use bouncefit::render::render_all;
+use bouncefit::shading::region::pixel_points;
 use bouncefit::shading::ShadingRecords;
 use common::{fit_json, read_json, repo, run_bad, run_ok, synth};
 use serde_json::Value;

@@ -13,7 +13,6 @@ pub mod light;
 mod manifest;
 pub mod materialgan;
 pub mod materialgan_writer;
-pub mod region;
 
 use std::fs;
 use std::path::{Path, PathBuf};

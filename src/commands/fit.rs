@@ -5,7 +5,6 @@
 use super::images::{display_exposure, write_photo_images};
 use super::output::{check_overwrite, StagedFolder};
 use crate::bsdf::Model;
-use crate::capture::region::{AppliedRegion, SampleRegion};
 use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::bayes::mcmc::{sample_posterior, McmcOptions, PosteriorRun};
@@ -23,6 +22,7 @@ use crate::material::FresnelSpec;
 use crate::microfacet::{Height, NdfKind};
 use crate::render::batch::Precision;
 use crate::render::plan::{Skip, Skips};
+use crate::shading::region::{AppliedRegion, SampleRegion};
 use crate::shading::{ExclusionCounts, ShadingRecords};
 use serde::Serialize;
 use std::path::{Path, PathBuf};

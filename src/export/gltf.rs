@@ -29,6 +29,7 @@
 //! under a metal texel.
 
 use super::maps::{MapsConversion, PbrTextures};
+use super::roughness::{anisotropy, gltf_roughness};
 use super::{Base, Conversion};
 use crate::material::FresnelSpec;
 use crate::microfacet::Height;
@@ -36,29 +37,11 @@ use base64::{engine::general_purpose::STANDARD as BASE64, Engine};
 use serde_json::{json, Map, Value};
 use std::path::Path;
 
-/// glTF's roughness range is [0, 1].
-fn roughness(alpha: f64) -> f64 {
-    alpha.sqrt().min(1.0)
-}
-
-/// `(roughness, anisotropyStrength, along_y)` of `alpha` (module table): glTF's roughness of
-/// the smaller alpha and the strength that stretches it to the larger along the tangent, or
-/// along the bitangent (the sample's y) when `along_y`.
-pub fn anisotropy(alpha: [f64; 2]) -> (f64, f64, bool) {
-    let (high, low, along_y) = super::stretch(alpha);
-    let strength = if high > low {
-        ((high.min(1.0) - low) / (1.0 - low)).max(0.0).sqrt()
-    } else {
-        0.0
-    };
-    (roughness(low), strength.min(1.0), along_y)
-}
-
 /// `(roughnessFactor, KHR_materials_anisotropy)`, see the module table.
 fn roughness_and_anisotropy(conversion: &Conversion) -> (f64, Option<Value>) {
     let alpha = conversion.material.alpha;
     if !conversion.is_anisotropic() {
-        return (roughness(alpha[0]), None);
+        return (gltf_roughness(alpha[0]), None);
     }
     let (roughness, strength, along_y) = anisotropy(alpha);
     let rotation = if along_y {

@@ -13,7 +13,7 @@
 //! | --- | --- | --- | --- |
 //! | `base_color.png` | glTF, MaterialX | metal: `F0`; dielectric: diffuse albedo | 8-bit sRGB (glTF 2.0 section 3.9.2 requires sRGB base colour) |
 //! | `metallic_roughness.png` | glTF, MaterialX | G: perceptual roughness `sqrt(alpha)` (capped at 1; anisotropic maps: of the smaller alpha), B: metallic 0 or 1, R: 0 | 16-bit linear (glTF 2.0 section 3.9.2: roughness in G, metalness in B) |
-//! | `anisotropy.png` | glTF, anisotropic maps | RG: the direction of the larger alpha in tangent space, `0.5 d + 0.5` (x: (1, 0.5), y: (0.5, 1)); B: `anisotropyStrength` ([`super::gltf::anisotropy`]) | 16-bit linear (`KHR_materials_anisotropy`'s `anisotropyTexture`) |
+//! | `anisotropy.png` | glTF, anisotropic maps | RG: the direction of the larger alpha in tangent space, `0.5 d + 0.5` (x: (1, 0.5), y: (0.5, 1)); B: `anisotropyStrength` ([`super::roughness::anisotropy`]) | 16-bit linear (`KHR_materials_anisotropy`'s `anisotropyTexture`) |
 //! | `standard_surface_roughness.png`, `open_pbr_roughness.png` | MaterialX, anisotropic maps | each shader's `specular_roughness` in R and its anisotropy in G ([`super::materialx`]'s table); B: `specular_rotation` (standard_surface), 0 (open_pbr_surface) | 16-bit linear |
 //! | `tangent.png` | MaterialX, anisotropic maps | the direction of the larger alpha, `(1, 0, 0)` (+x) or `(0, 1, 0)` (+y): open_pbr_surface's `geometry_tangent`, which has no rotation input | 16-bit linear |
 //! | `specular_color.png` | glTF, MaterialX, when some dielectric `F0` is not grey | dielectric: `F0 / F0(ior)` per channel; metal: 1 | 8-bit sRGB (KHR_materials_specular `specularColorTexture`) |
@@ -180,7 +180,7 @@ impl MapsConversion {
             .map(|t| {
                 [
                     0.0,
-                    super::gltf::anisotropy(t.material.alpha).0,
+                    super::roughness::anisotropy(t.material.alpha).0,
                     f64::from(u8::from(t.metal)),
                 ]
             })
@@ -190,7 +190,7 @@ impl MapsConversion {
             self.texels.iter().map(|t| of(t.material.alpha)).collect()
         };
         let gltf_anisotropy = |alpha| {
-            let (_, strength, along_y) = super::gltf::anisotropy(alpha);
+            let (_, strength, along_y) = super::roughness::anisotropy(alpha);
             if along_y {
                 [0.5, 1.0, strength]
             } else {
@@ -218,10 +218,10 @@ impl MapsConversion {
                 .transpose()?,
             standard_surface_roughness: materialx_texture(
                 "standard_surface_roughness.png",
-                &super::materialx::standard_surface_roughness,
+                &super::roughness::standard_surface_roughness,
             )?,
             open_pbr_roughness: materialx_texture("open_pbr_roughness.png", &|alpha| {
-                let [r, a] = super::materialx::open_pbr_roughness(alpha);
+                let [r, a] = super::roughness::open_pbr_roughness(alpha);
                 [r, a, 0.0]
             })?,
             tangent: materialx_texture("tangent.png", &|alpha| {

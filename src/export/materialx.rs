@@ -26,14 +26,14 @@
 //! `standard_surface`; multiple scattering is not carried.
 
 use super::maps::{MapsConversion, PbrTextures};
+use super::roughness::{
+    open_pbr_roughness, standard_surface_roughness, STANDARD_SURFACE_MAX_ANISOTROPY,
+};
 use super::{number, triple, xml_comment, Base, Conversion};
 use crate::bsdf::Model;
 use crate::material::FresnelSpec;
 use crate::microfacet::fresnel::ior_from_reflectivity_edge_tint;
 use std::path::Path;
-
-/// Standard Surface clamps its anisotropy to this (`mx_roughness_anisotropy`).
-const STANDARD_SURFACE_MAX_ANISOTROPY: f64 = 0.98;
 
 /// A typed input value of a MaterialX node.
 #[derive(Clone, Debug, PartialEq)]
@@ -117,27 +117,6 @@ const OPEN_PBR_NAMES: ShaderNames = ShaderNames {
     specular_weight: "specular_weight",
     ior: "specular_ior",
 };
-
-/// `[specular_roughness, specular_anisotropy, specular_rotation]` of standard_surface for
-/// `alpha` (module table; isotropic: anisotropy and rotation 0).
-pub fn standard_surface_roughness(alpha: [f64; 2]) -> [f64; 3] {
-    let (high, low, along_y) = super::stretch(alpha);
-    [
-        (high * low).powf(0.25),
-        (1.0 - low / high).min(STANDARD_SURFACE_MAX_ANISOTROPY),
-        if along_y { 0.25 } else { 0.0 },
-    ]
-}
-
-/// `[specular_roughness, specular_roughness_anisotropy]` of open_pbr_surface for `alpha`
-/// (module table), along the tangent, which must follow the larger alpha.
-pub fn open_pbr_roughness(alpha: [f64; 2]) -> [f64; 2] {
-    let (high, low, _) = super::stretch(alpha);
-    [
-        ((high * high + low * low) / 2.0).powf(0.25),
-        1.0 - low / high,
-    ]
-}
 
 fn standard_surface(conversion: &Conversion) -> Vec<(&'static str, Input)> {
     shader_inputs(

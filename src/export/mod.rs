@@ -30,6 +30,7 @@ pub mod json;
 pub mod maps;
 pub mod materialx;
 pub mod mitsuba;
+pub mod roughness;
 
 use crate::albedo::directional_albedo;
 use crate::bsdf::Model;

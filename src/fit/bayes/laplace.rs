@@ -14,7 +14,7 @@
 //! Standard coordinates: `z = R^T (x - mu)` with `H = R R^T`, so `z ~ N(0, I)` under the
 //! approximation and `x = mu + R^-T z`.
 
-use super::sampler::Target;
+use super::target::Target;
 use crate::fit::cholesky::Cholesky;
 use serde::{Deserialize, Serialize};
 

@@ -40,8 +40,8 @@
 //! a deterministic function of the coordinates (a fixed-noise approximation of the posterior of
 //! the exact model, with the models' per-pixel Monte Carlo error added to the image noise).
 
-use super::model_error::Adjustment;
-use super::sampler::Target;
+use super::adjustment::Adjustment;
+use super::target::Target;
 use crate::fit::point::objective::Objective;
 use crate::fit::point::params::{sigmoid, ParamSpace};
 use crate::loss::LossKind;

@@ -31,15 +31,17 @@
 //! different fingerprint is refused. Floats survive the JSON round trip exactly (serde_json's
 //! `float_roundtrip`).
 
+use super::adjustment::Adjustment;
 use super::discrepancy;
 use super::exposure::with_interval;
 use super::laplace::Laplace;
 use super::log_posterior::{self, LogPosterior, Noise, Reading};
-use super::model_error::{self, Adjustment, ModelError};
+use super::model_error::{self, ModelError};
 use super::posterior::{
     candidate_label, summarise, DiscrepancyScales, ModelErrorSummary, Posterior, RunFacts,
 };
-use super::sampler::{self, Candidate, ChainState, Schedule, Target};
+use super::sampler::{self, Candidate, ChainState, Schedule};
+use super::target::Target;
 use crate::bsdf::Model;
 use crate::error::{Error, Result};
 use crate::fit::point::params::ParamSpace;

@@ -1,5 +1,6 @@
 //! Bayesian inference over the point estimates' parameter spaces.
 
+pub mod adjustment;
 pub mod diagnostics;
 pub mod discrepancy;
 pub mod exposure;
@@ -11,3 +12,4 @@ pub mod model_error;
 pub mod posterior;
 pub mod sampler;
 pub mod selection;
+pub mod target;

@@ -38,6 +38,7 @@
 //! Measured by simulation (`scripts/interval-coverage.sh`, docs/intervals.md): see there for the
 //! coverage of each method.
 
+use super::adjustment::Adjustment;
 use super::laplace::Laplace;
 use super::log_posterior::{central_differences, LogPosterior, FD_STEP};
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
@@ -47,12 +48,6 @@ use std::collections::BTreeMap;
 /// Fewest clusters (photos) for which the clustered estimate is made: with two, `J` has rank
 /// one and its one direction is the difference of two photos.
 pub const MIN_PHOTOS: usize = 3;
-
-/// Name of the method in the posterior object, without and with the discrepancy term.
-const METHOD: [&str; 2] = [
-    "photo-clustered sandwich (Chandler & Bate 2007)",
-    "photo-clustered sandwich (Chandler & Bate 2007) and fitted discrepancy (Kennedy & O'Hagan 2001)",
-];
 
 /// How `fit --mcmc` accounts for model error (`--model-error`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -65,53 +60,6 @@ pub enum ModelError {
     Photos,
     /// None: intervals assume the model is exact and pixel noise independent.
     None,
-}
-
-/// The linear map `x -> mode + C (x - mode)` through which the adjusted likelihood is read.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Adjustment {
-    pub mode: Vec<f64>,
-    /// `C`, row-major `d x d`.
-    pub matrix: Vec<f64>,
-    /// Per coordinate: the adjusted posterior standard deviation over the model's (>= 1).
-    pub widening: Vec<f64>,
-    /// Photos whose scores entered `J`.
-    pub photos: usize,
-    /// The fitted discrepancy's prior scales (per-photo offset, lobe-shape coefficient): most
-    /// likely, then root-mean-square under their posterior; when the term was used.
-    pub discrepancy: Option<[[f64; 2]; 2]>,
-}
-
-impl Adjustment {
-    fn dim(&self) -> usize {
-        self.mode.len()
-    }
-
-    /// Name of the method that made this adjustment.
-    pub fn method(&self) -> &'static str {
-        METHOD[usize::from(self.discrepancy.is_some())]
-    }
-
-    /// `mode + C (x - mode)`: where the unadjusted likelihood is read.
-    pub fn apply(&self, x: &[f64]) -> Vec<f64> {
-        let d = self.dim();
-        (0..d)
-            .map(|i| {
-                self.mode[i]
-                    + (0..d)
-                        .map(|j| self.matrix[i * d + j] * (x[j] - self.mode[j]))
-                        .sum::<f64>()
-            })
-            .collect()
-    }
-
-    /// `C^T g`: a gradient at `apply(x)` taken back to `x`.
-    pub fn pull_back(&self, g: &[f64]) -> Vec<f64> {
-        let d = self.dim();
-        (0..d)
-            .map(|j| (0..d).map(|i| self.matrix[i * d + j] * g[i]).sum())
-            .collect()
-    }
 }
 
 /// Largest leverage of one photo in the jackknife (the share of the evidence in a direction

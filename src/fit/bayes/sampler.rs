@@ -35,6 +35,7 @@
 //! rest of the run, and a run resumed from a checkpoint repeats an uninterrupted one exactly.
 
 use super::laplace::Laplace;
+use super::target::Target;
 use crate::random::rng_stream;
 use crate::random::Rng;
 use rand::Rng as _;
@@ -44,14 +45,6 @@ use serde::{Deserialize, Serialize};
 
 /// Target acceptance probability of MALA during warm-up.
 pub const TARGET_ACCEPTANCE: f64 = 0.574;
-
-/// A log density over unbounded coordinates, with its gradient.
-pub trait Target: Sync {
-    fn dim(&self) -> usize;
-    /// `ln p(x)` up to a constant shared by all candidates; `-inf` outside the support.
-    fn log_density(&self, x: &[f64]) -> f64;
-    fn gradient(&self, x: &[f64]) -> Vec<f64>;
-}
 
 /// One candidate model of the product space: its density and its Laplace approximations, at
 /// its MAP first and then at any other mode.

@@ -13,7 +13,7 @@
 //! for the block sizes counted; a printed pattern or a patch boundary inside the region shows
 //! up as blocks tens of percent apart.
 
-use crate::capture::region::AppliedRegion;
+use crate::shading::region::AppliedRegion;
 use crate::shading::ShadingRecords;
 use serde::Serialize;
 

@@ -14,10 +14,10 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use super::image_io::load_image;
-use super::{Capture, ColorEncoding, Sample};
+use super::ShadingRecords;
+use crate::capture::image_io::load_image;
+use crate::capture::{Capture, ColorEncoding, Sample};
 use crate::error::{Error, Result};
-use crate::shading::ShadingRecords;
 
 /// The part of the sample a fit uses.
 #[derive(Clone, Debug, PartialEq)]
