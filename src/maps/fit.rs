@@ -1399,36 +1399,169 @@ impl Clusters {
         keep(&mut self.kinds, &used);
     }
 
-    /// Each centre becomes the precision-weighted mean of its texels' first `dim` coordinates;
+    /// Each centre becomes the precision-weighted mean of its texels' first `dim` coordinates,
+    /// taken where they are clustered ([`clustering_coordinate`]: F0 itself, not `logit F0`);
     /// once the bases have kinds, a basis's F0 is that of its texels of its own kind only (the
     /// first `roughness` coordinates come from all its texels).
     fn recentre(&mut self, texels: &[TexelFit], seen: &[usize], dim: usize, roughness: usize) {
+        self.recentre_over(texels, seen, dim, roughness, Weight::Data);
+    }
+
+    /// [`Clusters::recentre`] over the texels `members` only, each coordinate weighted by
+    /// `weight`.
+    fn recentre_over(
+        &mut self,
+        texels: &[TexelFit],
+        members: &[usize],
+        dim: usize,
+        roughness: usize,
+        weight: Weight,
+    ) {
         let k = self.centres.len();
         let mut sums = vec![vec![0.0; dim]; k];
         let mut weights = vec![vec![0.0; dim]; k];
-        for &t in seen {
+        for &t in members {
             let c = self.assignment[t];
             let own_kind = self.kinds.get(c).is_none_or(|&kind| kind == texels[t].kind);
             for j in 0..if own_kind { dim } else { roughness } {
-                let w = texels[t].precision[j].max(1e-9);
-                sums[self.assignment[t]][j] += w * texels[t].x[j];
-                weights[self.assignment[t]][j] += w;
+                let (value, w) = clustering_coordinate(&texels[t], j, roughness, weight);
+                sums[c][j] += w * value;
+                weights[c][j] += w;
             }
         }
         for c in 0..k {
             for j in 0..dim {
                 if weights[c][j] > 0.0 {
-                    self.centres[c][j] = sums[c][j] / weights[c][j];
+                    let mean = sums[c][j] / weights[c][j];
+                    self.centres[c][j] = if j < roughness { mean } else { logit(mean) };
                 }
+            }
+        }
+    }
+
+    /// Lloyd's iteration on the truncated cost of [`weighted_kmeans`]: every texel goes to its
+    /// nearest centre, and each centre becomes the mean of its texels within
+    /// [`OUTLIER_COST`] of it, until no label changes.
+    fn lloyd(&mut self, texels: &[TexelFit], seen: &[usize], dim: usize, roughness: usize) {
+        for _ in 0..LLOYD_ITERATIONS {
+            let nearest: Vec<(usize, f64)> = (0..texels.len())
+                .into_par_iter()
+                .map(|t| {
+                    self.centres
+                        .iter()
+                        .map(|c| clustering_distance(&texels[t], c, roughness))
+                        .enumerate()
+                        .min_by(|a, b| a.1.total_cmp(&b.1))
+                        .expect("k >= 1")
+                })
+                .collect();
+            let next: Vec<usize> = nearest.iter().map(|&(c, _)| c).collect();
+            let changed = next != self.assignment;
+            self.assignment = next;
+            let inliers: Vec<usize> = seen
+                .iter()
+                .copied()
+                .filter(|&t| nearest[t].1 < OUTLIER_COST)
+                .collect();
+            self.recentre_over(texels, &inliers, dim, roughness, Weight::Marginal);
+            if !changed {
+                break;
             }
         }
     }
 }
 
-/// Weighted k-means: centres of `dim` leading coordinates, each texel's coordinate weighted by
-/// its data precision; deterministic farthest-point start from the most precise texel. A
-/// basis is of the kind most of its texels are. The first `roughness` coordinates are the
-/// roughness ([`Clusters::recentre`]).
+/// Lloyd iterations of [`weighted_kmeans`] at most, after each basis is added.
+const LLOYD_ITERATIONS: usize = 50;
+/// Texels tried as the next centre of [`weighted_kmeans`] at most (evenly spaced over the
+/// seen texels), so a step costs `CANDIDATES` passes over the texels at any grid.
+const CANDIDATES: usize = 256;
+/// The most a texel costs [`weighted_kmeans`]: the 99.7% point of a chi-square with 4 degrees
+/// of freedom (one roughness and three F0 coordinates, each in units of its marginal standard
+/// deviation). A texel further than this from every centre is counted as an outlier, not
+/// averaged into a basis.
+const OUTLIER_COST: f64 = 16.0;
+
+/// How a texel's coordinates are weighted where the bases are averaged.
+#[derive(Clone, Copy)]
+enum Weight {
+    /// By the data precision `(J^T J)_jj` alone (stage 4's means, around which the texels'
+    /// priors are centred).
+    Data,
+    /// By the precision of the texel's estimate about its basis's centre, the data's
+    /// variance plus the basis prior's (`SIGMA_LN_ALPHA`, `SIGMA_LOGIT_F0`): the weight of a
+    /// Gaussian mixture over the texels' estimates (k-means).
+    Marginal,
+}
+
+/// A texel's specular coordinate `j` where the bases are clustered and averaged, and its
+/// `weight` there: the roughness coordinates as fitted (`ln alpha`); in place of `logit F0`,
+/// F0 itself, with precision `(J^T J)_jj / (F0 (1 - F0))^2` and the prior's sd
+/// `SIGMA_LOGIT_F0 F0 (1 - F0)` (the logit's, carried over at the texel's F0). A pixel is
+/// nearly linear in Schlick's F0, so its precision there stays finite as F0 nears 1, where
+/// `logit F0`'s falls as `(F0 (1 - F0))^2`: gold with red F0 1.0 had its saturated texels
+/// weigh nothing in a basis's mean, which the mixed texels of the ellipse's edge then took to
+/// red F0 0.48 (docs/maps.md, "A truth the change was not made on").
+fn clustering_coordinate(
+    texel: &TexelFit,
+    j: usize,
+    roughness: usize,
+    weight: Weight,
+) -> (f64, f64) {
+    let (x, precision) = (texel.x[j], texel.precision[j]);
+    let (value, precision, sd) = if j < roughness {
+        (x, precision, SIGMA_LN_ALPHA)
+    } else {
+        // dF0 / dlogit F0 = F0 (1 - F0), in a form that does not round to 0 at large |x|.
+        let e = (-x.abs()).exp();
+        let slope = e / (1.0 + e).powi(2);
+        (
+            sigmoid(x),
+            precision / (slope * slope).max(1e-300),
+            SIGMA_LOGIT_F0 * slope,
+        )
+    };
+    let w = match weight {
+        Weight::Data => precision,
+        Weight::Marginal => 1.0 / (1.0 / precision + sd * sd),
+    };
+    (value, w.max(1e-9))
+}
+
+/// The squared distance of `texel` from `centre` (roughness coordinates and `logit F0`, as the
+/// bases hold them) in the coordinates of [`clustering_coordinate`], each weighted by its
+/// marginal precision.
+fn clustering_distance(texel: &TexelFit, centre: &[f64], roughness: usize) -> f64 {
+    centre
+        .iter()
+        .enumerate()
+        .map(|(j, &c)| {
+            let (value, w) = clustering_coordinate(texel, j, roughness, Weight::Marginal);
+            let c = if j < roughness { c } else { sigmoid(c) };
+            w * (value - c).powi(2)
+        })
+        .sum()
+}
+
+/// Weighted k-means with outliers: centres of `dim` leading coordinates, each texel costing
+/// its squared distance from the nearest centre, each coordinate weighted by the precision of
+/// the texel's estimate about its basis ([`Weight::Marginal`]), and at most [`OUTLIER_COST`]:
+/// the hard-assignment form of a Gaussian mixture with a uniform noise component (Banfield &
+/// Raftery 1993, "Model-based Gaussian and non-Gaussian clustering", Biometrics 49, section
+/// 4), as in trimmed k-means (Cuesta-Albertos, Gordaliza & Matran 1997, Annals of Statistics
+/// 25). The centres are added one at a time, each at the texel that most lowers that cost
+/// given the centres so far, then Lloyd's iteration ([`Clusters::lloyd`]): the fast global
+/// k-means of Likas, Vlassis & Verbeek 2003 ("The global k-means clustering algorithm",
+/// Pattern Recognition 36, section 2.1: the candidate with the largest bound on the cost it
+/// removes), over at most [`CANDIDATES`] texels. Deterministic, so the bases do not depend on
+/// the thread count.
+///
+/// Before, the start took the texel farthest from the centres so far and every texel counted
+/// in full by its data precision, which finds far, small groups before near, large ones: on a
+/// three-material truth the third basis went to the mixed texels of a gold ellipse's edge (F0
+/// between the gold's and the paint's, and seen sharply) and not to a ceramic stripe of 13%
+/// of the texels (docs/maps.md). A basis is of the kind most of its texels are. The first
+/// `roughness` coordinates are the roughness ([`Clusters::recentre`]).
 fn weighted_kmeans(
     texels: &[TexelFit],
     seen: &[usize],
@@ -1436,56 +1569,45 @@ fn weighted_kmeans(
     roughness: usize,
     k: usize,
 ) -> Clusters {
-    let distance = |t: usize, centre: &[f64]| -> f64 {
-        (0..dim)
-            .map(|j| texels[t].precision[j].max(1e-9) * (texels[t].x[j] - centre[j]).powi(2))
-            .sum()
-    };
-    let total_precision = |t: usize| (0..dim).map(|j| texels[t].precision[j]).sum::<f64>();
-    let mut centres: Vec<Vec<f64>> = Vec::new();
-    match seen
-        .iter()
-        .max_by(|&&a, &&b| total_precision(a).total_cmp(&total_precision(b)))
-    {
-        Some(&first) => centres.push(texels[first].x[..dim].to_vec()),
-        None => centres.push(texels[0].x[..dim].to_vec()),
-    }
-    while centres.len() < k {
-        let gap = |t: usize| {
-            centres
-                .iter()
-                .map(|c| distance(t, c))
-                .fold(f64::INFINITY, f64::min)
-        };
-        match seen
-            .iter()
-            .copied()
-            .max_by(|&a, &b| gap(a).total_cmp(&gap(b)))
-        {
-            Some(t) => centres.push(texels[t].x[..dim].to_vec()),
-            None => centres.push(centres[0].clone()),
-        }
-    }
-    let nearest = |t: usize, centres: &[Vec<f64>]| {
-        (0..centres.len())
-            .min_by(|&a, &b| distance(t, &centres[a]).total_cmp(&distance(t, &centres[b])))
-            .expect("k >= 1")
-    };
     let mut clusters = Clusters {
-        centres,
+        centres: Vec::new(),
         kinds: Vec::new(),
-        assignment: vec![usize::MAX; texels.len()],
+        assignment: vec![0; texels.len()],
     };
-    for _ in 0..50 {
-        let next: Vec<usize> = (0..texels.len())
-            .map(|t| nearest(t, &clusters.centres))
+    let candidates: Vec<usize> = seen
+        .iter()
+        .copied()
+        .step_by(seen.len().div_ceil(CANDIDATES).max(1))
+        .collect();
+    while clusters.centres.len() < k {
+        let cost = |t: usize, centre: &[f64]| {
+            clustering_distance(&texels[t], centre, roughness).min(OUTLIER_COST)
+        };
+        let nearest: Vec<f64> = seen
+            .par_iter()
+            .map(|&t| {
+                clusters
+                    .centres
+                    .iter()
+                    .map(|c| cost(t, c))
+                    .fold(OUTLIER_COST, f64::min)
+            })
             .collect();
-        let changed = next != clusters.assignment;
-        clusters.assignment = next;
-        clusters.recentre(texels, seen, dim, roughness);
-        if !changed {
-            break;
-        }
+        let gains: Vec<f64> = candidates
+            .par_iter()
+            .map(|&n| {
+                let centre = &texels[n].x[..dim];
+                seen.iter()
+                    .zip(&nearest)
+                    .map(|(&t, &d)| (d - cost(t, centre)).max(0.0))
+                    .sum()
+            })
+            .collect();
+        let best = (0..candidates.len())
+            .max_by(|&a, &b| gains[a].total_cmp(&gains[b]))
+            .map_or(0, |i| candidates[i]);
+        clusters.centres.push(texels[best].x[..dim].to_vec());
+        clusters.lloyd(texels, seen, dim, roughness);
     }
     let assignment = &clusters.assignment;
     let kinds = (0..k)
@@ -1741,5 +1863,61 @@ mod tests {
             ),
             None
         );
+    }
+
+    /// Texel estimates like those of the three-material truth of docs/maps.md at 32^2: a
+    /// glossy paint (alpha 0.15) and a ceramic stripe (0.35, 13% of the texels) with a
+    /// dielectric's F0, a gold whose red F0 is saturated (its `logit F0` hardly seen), and the
+    /// mixed texels of the gold's edge, F0 between the two and sharply seen. k-means with three
+    /// bases finds the three materials, and the gold keeps its red F0. Before, the
+    /// farthest-point start gave the third basis to the edge texels, and the mean in `logit
+    /// F0` took the gold's red F0 to the edge texels'.
+    #[test]
+    fn kmeans_finds_a_near_large_group_before_far_mixed_texels_and_keeps_a_saturated_f0() {
+        // F0's data precision in `logit F0` at F0 `f`, for a precision 1e5 in F0 itself.
+        let texel = |kind: Kind, alpha: f64, f0: [f64; 3]| TexelFit {
+            kind,
+            x: [alpha.ln()].into_iter().chain(f0.map(logit)).collect(),
+            data_cost: 0.0,
+            residuals: 1,
+            precision: [400.0]
+                .into_iter()
+                .chain(f0.map(|f| 1e5 * (f * (1.0 - f)).powi(2)))
+                .collect(),
+        };
+        let mut texels = Vec::new();
+        for t in 0..1000 {
+            let wobble = 1.0 + 0.01 * ((t * 37 % 11) as f64 - 5.0) / 5.0;
+            texels.push(match t % 100 {
+                0..66 => texel(Kind::Dielectric, 0.15 * wobble, [0.04 * wobble; 3]),
+                66..79 => texel(Kind::Dielectric, 0.35 * wobble, [0.04 * wobble; 3]),
+                79..98 => texel(Kind::Metal, 0.4 * wobble, [0.9995, 0.78, 0.34]),
+                // The edge: 2% of the texels, from 10% to 60% gold.
+                m => {
+                    let gold = 0.1 + 0.5 * (t / 100) as f64 / 9.0 + 0.05 * (m - 98) as f64;
+                    let f0 = [0.9995, 0.78, 0.34].map(|g| gold * g + (1.0 - gold) * 0.04);
+                    texel(Kind::Dielectric, 0.25, f0)
+                }
+            });
+        }
+        let seen: Vec<usize> = (0..texels.len()).collect();
+        let clusters = weighted_kmeans(&texels, &seen, 4, 1, 3);
+        let mut found: Vec<(Kind, f64, f64)> = clusters
+            .centres
+            .iter()
+            .zip(&clusters.kinds)
+            .map(|(c, &kind)| (kind, c[0].exp(), sigmoid(c[1])))
+            .collect();
+        found.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let truth = [
+            (Kind::Dielectric, 0.15, 0.04),
+            (Kind::Dielectric, 0.35, 0.04),
+            (Kind::Metal, 0.4, 0.9995),
+        ];
+        for ((kind, alpha, red), (true_kind, true_alpha, true_red)) in found.iter().zip(truth) {
+            assert_eq!(*kind, true_kind, "{found:?}");
+            assert!((alpha / true_alpha - 1.0).abs() < 0.03, "{found:?}");
+            assert!((red - true_red).abs() < 0.01, "{found:?}");
+        }
     }
 }
