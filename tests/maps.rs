@@ -110,6 +110,18 @@ fn truth_set_from(
     side: usize,
     extra: &[&str],
 ) -> (MaterialMaps, PathBuf) {
+    let capture = flash_template(dir, side);
+    truth_set_captured(truth, dir, &capture, extra)
+}
+
+/// The photo set of the maps `truth` taken by the capture template `capture`, into `dir/set`,
+/// with 1% noise unless `extra` (more `synth` options) says otherwise.
+fn truth_set_captured(
+    truth: MaterialMaps,
+    dir: &Path,
+    capture: &Path,
+    extra: &[&str],
+) -> (MaterialMaps, PathBuf) {
     let material = dir.join("truth.json");
     truth.save(&material, Default::default()).unwrap();
     let set = dir.join("set");
@@ -119,7 +131,7 @@ fn truth_set_from(
         vec!["--noise", "0.01"]
     };
     options.extend_from_slice(extra);
-    synth(&material, &flash_template(dir, side), &set, &options);
+    synth(&material, capture, &set, &options);
     (truth, set)
 }
 
@@ -556,6 +568,129 @@ fn coarse_texel_grids_find_both_materials_of_the_bundled_set() {
         } else {
             // `single` makes up the copper's missing multiple scattering with a narrower lobe.
             assert!(copper > 0.3, "{name}: copper alpha {copper}");
+        }
+    }
+}
+
+/// A truth of three materials (docs/maps.md, "The number of bases"): a gold ellipse (metal,
+/// alpha 0.4, F0 (`red`, 0.78, 0.34), 21% of the texels) and a stripe of grey ceramic
+/// (dielectric, alpha 0.35, albedo 0.6, 13%) on a blue paint (dielectric, alpha 0.15, albedo
+/// (0.08, 0.18, 0.45)), on a `side` x `side` texel grid.
+fn three_material_truth(side: usize, red: f64) -> MaterialMaps {
+    let gold = ([red, 0.78, 0.34], 0.4, [0.0; 3]);
+    let ceramic = ([0.04; 3], 0.35, [0.6; 3]);
+    let paint = ([0.04; 3], PAINT_ALPHA, [0.08, 0.18, 0.45]);
+    let material = |t: usize| {
+        let (u, v) = (
+            ((t % side) as f64 + 0.5) / side as f64,
+            ((t / side) as f64 + 0.5) / side as f64,
+        );
+        if ((u - 0.38) / 0.30).powi(2) + ((v - 0.5) / 0.223).powi(2) < 1.0 {
+            gold
+        } else if (0.78..0.91).contains(&u) {
+            ceramic
+        } else {
+            paint
+        }
+    };
+    let mut maps = truth_maps(Model::KullaConty, side);
+    let texels = 0..side * side;
+    maps.specular = Some(texels.clone().map(|t| material(t).0).collect());
+    maps.roughness = Some(texels.clone().map(|t| [material(t).1; 2]).collect());
+    maps.diffuse = Some(texels.map(|t| material(t).2).collect());
+    maps
+}
+
+/// The capture of [`three_material_truth`]: an 8 cm sample, rectified photos of `side` pixels,
+/// 6 flash photos from around the normal and 4 lit by a point light 14 cm off axis on each
+/// side, 10 cm up (the last, lit from -y, is the validation photo).
+fn side_lit_template(dir: &Path, side: usize) -> PathBuf {
+    let mut text = format!(
+        "name = \"three-materials\"\nunits = \"cm\"\n[sample]\nwidth = 8.0\nheight = 8.0\n\
+         [camera]\nmodel = \"rectified\"\nposition = [0.0, 0.0, 18.0]\n\
+         resolution = [{side}, {side}]\n"
+    );
+    let cameras = [
+        [0.0, 0.0, 18.0],
+        [3.0, 3.2, 17.2],
+        [-2.6, -2.1, 17.6],
+        [-2.1, 2.4, 18.6],
+        [2.2, -2.0, 17.0],
+        [0.5, -3.0, 18.2],
+    ];
+    for (i, c) in cameras.iter().enumerate() {
+        text += &format!(
+            "[[photo]]\nimage = \"{i:02}.exr\"\ncamera = {{ position = {c:?} }}\n\
+             light = {{ kind = \"flash\", intensity = [1500.0, 1500.0, 1500.0] }}\n"
+        );
+    }
+    let lights = [
+        [14.0, 0.0, 10.0],
+        [-14.0, 0.0, 10.0],
+        [0.0, 14.0, 10.0],
+        [0.0, -14.0, 10.0],
+    ];
+    for (i, l) in lights.iter().enumerate() {
+        text += &format!(
+            "[[photo]]\nimage = \"{:02}.exr\"\nlight = {{ kind = \"point\", position = {l:?}, \
+             intensity = [3000.0, 3000.0, 3000.0] }}\n",
+            cameras.len() + i
+        );
+    }
+    let path = dir.join(format!("side-lit-{side}.capture.toml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Issue #43: `fit --maps` finds the three materials of [`three_material_truth`], each of its
+/// kind and with its alpha within 3%, at a texel grid coarser than the photos (texels astride
+/// the gold's edge mix two materials) and at one texel a pixel (every texel's own photos pin
+/// it down, so no number of bases predicts the validation photo better than another), with
+/// the gold's red F0 below 1 and saturated. Before, the fits kept four bases at 32^2 (the
+/// fourth on the edge's mixed texels) and one at 64^2 (docs/maps.md, "The number of bases").
+#[test]
+fn maps_fits_find_three_materials_at_coarse_and_fine_texel_grids() {
+    let side = 64;
+    for red in [0.95, 1.0] {
+        let dir = tempfile::tempdir().unwrap();
+        let capture = side_lit_template(dir.path(), side);
+        let (_, set) =
+            truth_set_captured(three_material_truth(side, red), dir.path(), &capture, &[]);
+        for texels in ["32x32", "64x64"] {
+            let name = format!("red-{red}-{texels}");
+            let fit = fit_maps(
+                &set,
+                dir.path(),
+                &name,
+                &["--models", "kulla-conty", "--texels", texels],
+            );
+            let mut bases: Vec<(String, f64, f64)> = fit["maps_fit"]["bases"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|b| {
+                    let kind = b["kind"].as_str().unwrap().to_string();
+                    (
+                        kind,
+                        b["alpha"].as_f64().unwrap(),
+                        b["share"].as_f64().unwrap(),
+                    )
+                })
+                .collect();
+            bases.sort_by(|a, b| a.1.total_cmp(&b.1));
+            eprintln!("{name}: bases (kind, alpha, share) {bases:?}");
+            assert_eq!(bases.len(), 3, "{name}: bases {bases:?}");
+            for ((kind, alpha, _), (truth_kind, truth_alpha)) in
+                bases
+                    .iter()
+                    .zip([("dielectric", 0.15), ("dielectric", 0.35), ("metal", 0.4)])
+            {
+                assert_eq!(kind, truth_kind, "{name}: bases {bases:?}");
+                assert!(
+                    (alpha / truth_alpha - 1.0).abs() < 0.03,
+                    "{name}: alpha {alpha} for {truth_alpha}"
+                );
+            }
         }
     }
 }
