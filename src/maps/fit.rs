@@ -16,7 +16,7 @@
 //! | 2 | noise level | `sigma^2 = sum r^2 / (residuals - parameters)` of stage 1, so the data term is a Gaussian log-likelihood and the prior's units are those of the coordinates |
 //! | 3 | `K` basis materials | k-means over the texels' specular coordinates (`ln alpha`, `logit F0`), each coordinate weighted by its Gauss-Newton precision `(J^T J)_jj` (a texel's diagonal Laplace approximation), so poorly seen texels hardly move the bases and are assigned by what is seen of them |
 //! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; each texel as either kind (a texel of the basis's other kind takes only its roughness), from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own; the texels' priors are centred on the precision-weighted means of their basis's texels, and the bases reported are then re-estimated by maximum likelihood on the photos of their texels of their kind together (Gauss-Newton, each texel with its own albedo, [`pooled_centre`]), since that mean is biased low under noise |
-//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels and at their resolution ([`texel_relative_error`]); the fewest bases within 2% of the best error are kept (a basis no texel takes is dropped, [`Clusters::drop_empty`]), with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
+//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels and at their resolution ([`texel_relative_error`]); of the `K` within 2% of the best error, the one with the lowest BIC of its clustering ([`fewest_good_bases`]; blends of two bases, bases that do not pay for themselves in that BIC and bases left with under 1% of the texels are dropped, [`Clusters::drop_non_materials`], [`take_negligible_bases_texels`], [`Clusters::drop_empty`]), with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
 //!
 //! Texels are independent given the bases, so each is a small dense problem (4 to 10
 //! coordinates: `ln alpha` (with `anisotropic`, `ln alpha_x` and `ln alpha_y`, each with the
@@ -91,8 +91,9 @@ const LABEL_COUPLING: f64 = 6.0;
 /// and its albedo error tripled (0.005 to 0.016 RMS).
 const KIND_SWITCH: f64 = 13.8;
 const ICM_SWEEPS: usize = 10;
-/// The fewest bases whose validation error is within this fraction of the best are chosen
-/// (the "one standard error" rule of Hastie, Tibshirani & Friedman, *The Elements of
+/// The numbers of bases whose validation error is within this fraction of the best are those
+/// the validation photo cannot tell apart; [`fewest_good_bases`] chooses among them (as the
+/// "one standard error" rule of Hastie, Tibshirani & Friedman, *The Elements of
 /// Statistical Learning*, section 7.10: an extra basis that gains less than the noise of the
 /// validation error only fits noise; on the synthetic two-material sets the gains past the
 /// true count are 0.1-0.5%).
