@@ -1588,13 +1588,13 @@ impl Clusters {
     /// about its centre in each coordinate: (1) its centre lies within its spread of the
     /// segment from `a`'s centre to `b`'s (squared distance, each coordinate in units of `s`,
     /// at most [`OUTLIER_COST`], as a texel is an inlier of a basis), strictly between the
-    /// two, and (2) its texels are
-    /// spread along the segment (their positions on it, projected in the same units, have a
-    /// standard deviation of at least [`BLEND_SPREAD`] of its length). A texel astride an edge
-    /// mixes the two materials in whatever proportion the edge cuts it, so its estimate lies
-    /// between theirs (a pixel is nearly linear in F0), at a place that varies from texel to
-    /// texel; the texels of a material lying between two others in these coordinates (a
-    /// dielectric of middling roughness) sit at one place, spread by their noise alone.
+    /// two, and (2) its texels are spread along the segment (their positions on it, projected
+    /// in the same units, have a standard deviation of at least [`BLEND_SPREAD`] of its
+    /// length). A texel astride an edge mixes the two materials in whatever proportion the
+    /// edge cuts it, so its estimate lies between theirs (a pixel is nearly linear in F0), at
+    /// a place that varies from texel to texel; the texels of a material lying between two
+    /// others in these coordinates (a dielectric of middling roughness) sit at one place,
+    /// spread by their noise alone.
     fn is_blend(&self, texels: &[TexelFit], seen: &[usize], c: usize, roughness: usize) -> bool {
         let members: Vec<Vec<f64>> = seen
             .iter()
