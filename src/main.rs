@@ -39,7 +39,7 @@ enum Command {
     /// Phone photos of a sample in a printed board -> a photo set (rectified or perspective).
     Capture(commands::capture::CaptureArgs),
     /// Fit material parameters to a photo set.
-    Fit(commands::fit::FitArgs),
+    Fit(commands::fit_args::FitArgs),
     /// Write a fit or material for a renderer (json, mitsuba, gltf, materialx).
     Export(commands::export::ExportArgs),
     /// Fit several models to the same photos and write a comparison report.

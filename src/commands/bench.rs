@@ -10,8 +10,8 @@
 //! The fit jobs use the options of `fit` (the same flags, e.g. `--pixel-samples`,
 //! `--max-iters`), and `--seed` seeds everything.
 
-use super::fit::FitOptionArgs;
-use super::fit_maps::{MapsArgs, MapsSet};
+use super::fit_args::{FitOptionArgs, MapsArgs};
+use super::fit_maps::MapsSet;
 use super::output::StagedFolder;
 use crate::bench::cpu_time::process_seconds;
 use crate::bench::estimators::{self, EstimatorRow, EstimatorSettings, ALPHA_RANGE};

@@ -12,11 +12,9 @@
 //! | `-o REPORT_DIR` | staged and renamed into place; an existing non-empty folder needs `--force` |
 //! | `--maps` and its options (`--texels`, `--normals`, `--bases`, `--holdout-photo N`) | fit each model as material maps ([`super::fit_maps`]) and write the maps report ([`crate::report::maps`]): the maps side by side, re-renders and residuals of every photo, the held-out photo's error, and each multi-bounce model minus `single` per texel and per basis material. `--holdout K` and `--mcmc` are refused (a maps fit holds out one photo) |
 
-use super::fit::{
-    fit_and_sample, load_records, measure_fits, select, FitFile, FitOptionArgs, McmcArgs,
-    RegionReport,
-};
-use super::fit_maps::{MapsArgs, MapsRun, MapsSet};
+use super::fit::{fit_and_sample, load_records, measure_fits, select, FitFile, RegionReport};
+use super::fit_args::{FitOptionArgs, MapsArgs, McmcArgs};
+use super::fit_maps::{MapsRun, MapsSet};
 use super::images::display_exposure;
 use super::output::StagedFolder;
 use crate::bsdf::Model;

@@ -3,7 +3,8 @@
 //! `normal.png`) plus residual images, every output staged and committed at the end. Pixels are
 //! evaluated at their centre (one sub-sample), so each sees exactly one texel.
 
-use super::fit::{load_records, output_path, residuals, FitArgs, FitOptionArgs};
+use super::fit::{load_records, residuals};
+use super::fit_args::{FitArgs, FitOptionArgs, MapsArgs};
 use super::images::{display_exposure, write_photo_images};
 use super::output::StagedFolder;
 use crate::bsdf::Model;
@@ -13,56 +14,12 @@ use crate::fit::fit_model;
 use crate::fit::point::exposure::exposed_records;
 use crate::fit::point::params::FresnelFamily;
 use crate::loss::LossKind;
-use crate::maps::fit::{fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions, Normals};
+use crate::maps::fit::{fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions};
 use crate::maps::render::render_maps;
 use crate::maps::{MaterialMaps, TexelGrid};
 use crate::shading::{PhotoSpan, ShadingRecords};
 use serde_json::json;
 use std::path::{Path, PathBuf};
-
-/// The options of `fit --maps`.
-#[derive(clap::Args, Debug, Clone)]
-pub struct MapsArgs {
-    /// Fit material maps (per-texel diffuse albedo, specular F0, roughness; see --normals)
-    /// instead of one uniform material.
-    #[arg(long)]
-    pub maps: bool,
-    /// Texel grid WIDTHxHEIGHT over the sample (default: the first photo's width, the height
-    /// in the sample's proportions).
-    #[arg(long, value_parser = parse_texels, requires = "maps")]
-    pub texels: Option<TexelGrid>,
-    /// Fit a shading normal per texel too: `--normals` (or `=on`), `=off`, or `=auto` to fit
-    /// both and keep normals where they predict the validation photo better by more than 2%.
-    #[arg(long, value_enum, num_args = 0..=1, require_equals = true,
-          default_value = "off", default_missing_value = "on", requires = "maps")]
-    pub normals: Normals,
-    /// Most basis materials tried; the number is chosen by the error of a validation photo.
-    #[arg(long, default_value_t = 4, requires = "maps",
-          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=12))]
-    pub bases: usize,
-    /// Leave photo N (0-based, capture order) out of the fit and report the relative error of
-    /// its prediction in the fit file (`holdout`).
-    #[arg(long, requires = "maps")]
-    pub holdout_photo: Option<usize>,
-}
-
-fn parse_texels(text: &str) -> std::result::Result<TexelGrid, String> {
-    let parts: Vec<&str> = text.split(['x', 'X']).collect();
-    let [w, h] = parts.as_slice() else {
-        return Err(format!("`{text}`: expected WIDTHxHEIGHT, e.g. 256x256"));
-    };
-    let number = |s: &str| {
-        s.trim()
-            .parse::<usize>()
-            .ok()
-            .filter(|&n| (1..=8192).contains(&n))
-            .ok_or_else(|| format!("`{text}`: sizes must be whole numbers from 1 to 8192"))
-    };
-    Ok(TexelGrid {
-        width: number(w)?,
-        height: number(h)?,
-    })
-}
 
 pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
     let [model] = args.models.as_slice() else {
@@ -79,7 +36,7 @@ pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
         ));
     }
     let capture = args.options.real.open(&args.capture)?;
-    let output = output_path(args, &capture)?;
+    let output = args.output_path(&capture)?;
     let maps_folder = StagedFolder::new(&MaterialMaps::folder_beside(&output), args.force)?;
     let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
     let set = MapsSet::new(&args.capture, capture, &args.options, &args.map_options)?;

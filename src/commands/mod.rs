@@ -7,6 +7,7 @@ pub mod capture;
 pub mod compare;
 pub mod export;
 pub mod fit;
+pub mod fit_args;
 pub mod fit_maps;
 pub mod image;
 pub mod images;

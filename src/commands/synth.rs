@@ -76,7 +76,7 @@ pub struct RenderArgs {
     pub seed: u64,
     /// The sample's surface lies this far below the plane the cameras and lights were
     /// calibrated on (as `fit --depth`).
-    #[arg(long, value_parser = super::fit::parse_depth)]
+    #[arg(long, value_parser = super::fit_args::parse_depth)]
     pub depth: Option<f64>,
     #[arg(long)]
     pub force: bool,
