@@ -150,6 +150,23 @@ impl ShadingRecords {
         restricted
     }
 
+    /// `predicted` (one value per pixel) minus the photo at every loss pixel, 0 elsewhere:
+    /// what the residual images of a fit show.
+    pub fn residuals(&self, predicted: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        predicted
+            .iter()
+            .zip(&self.target)
+            .zip(&self.weight)
+            .map(|((p, t), w)| {
+                if *w > 0.0 {
+                    [0, 1, 2].map(|c| p[c] - t[c])
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect()
+    }
+
     /// Computes the records of `capture` with `pixel_samples` stratified sub-samples per pixel
     /// (a perfect square k*k, see the module docs).
     ///

@@ -12,7 +12,7 @@
 //! | `-o REPORT_DIR` | staged and renamed into place; an existing non-empty folder needs `--force` |
 //! | `--maps` and its options (`--texels`, `--normals`, `--bases`, `--holdout-photo N`) | fit each model as material maps ([`super::fit_maps`]) and write the maps report ([`crate::report::maps`]): the maps side by side, re-renders and residuals of every photo, the held-out photo's error, and each multi-bounce model minus `single` per texel and per basis material. `--holdout K` and `--mcmc` are refused (a maps fit holds out one photo) |
 
-use super::fit::{fit_and_sample, load_records, measure_fits, select, FitFile, RegionReport};
+use super::fit::fit_photo_set;
 use super::fit_args::{FitOptionArgs, MapsArgs, McmcArgs};
 use super::fit_maps::{MapsRun, MapsSet};
 use super::images::display_exposure;
@@ -22,6 +22,7 @@ use crate::capture::atomic_file::write_atomically;
 use crate::error::{Error, Result};
 use crate::fit::bayes::holdout::{check_fold_count, cross_validate};
 use crate::fit::bayes::selection::{HeldOutErrors, HeldOutRanking};
+use crate::fit::fit_file::{FitFile, RegionReport};
 use crate::maps::compare::MapsDifference;
 use crate::maps::fit::check_model;
 use crate::render::render_all;
@@ -99,34 +100,29 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         check_fold_count(folds, capture.photos.len())?;
     }
     let folder = StagedFolder::new(&args.output, args.force)?;
-    let (records, region) = load_records(&args.capture, &capture, &args.options)?;
-    let Some(done) = fit_and_sample(
-        &records,
+    let options = args.options.pipeline_options(
         &args.models,
-        &args.options,
         &args.mcmc,
         &args.output,
-        args.quiet,
+        !args.quiet,
         args.force,
-    )?
-    else {
+    );
+    let Some(done) = fit_photo_set(&args.capture, &capture, &options, args.quiet)? else {
         return Ok(());
     };
-    let fits = &done.fits;
+    let (records, fits, selection) = (&done.records, &done.fits, &done.selection);
     let run = done.posterior.as_ref().map(|r| &r.posterior);
-    let measured = measure_fits(&records, fits, &args.options);
-    let selection = select(&records, fits, &measured, &args.options);
 
     let mut held_out = Vec::new();
     if let Some(folds) = holdout {
-        for &model in &args.models {
+        for candidate in &options.candidates {
+            let model = candidate.space.model;
             if !args.quiet {
                 eprintln!("{model}: {folds} held-out fits");
             }
-            let options = args.options.fit_options(model, !args.quiet);
             held_out.push(HeldOutErrors {
                 model,
-                fold_losses: cross_validate(&records, &options, folds)?,
+                fold_losses: cross_validate(records, candidate, folds)?,
             });
         }
     }
@@ -137,41 +133,42 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         .enumerate()
         .map(|(i, fit)| {
             let errors = held_out.get(i).map(|e| HeldOut::new(e.fold_losses.clone()));
-            ModelRow::new(fit, &selection, errors, run)
+            ModelRow::new(fit, selection, errors, run)
         })
         .collect();
 
     let root = folder.path("");
     let predictions: Vec<Vec<[f64; 3]>> = fits
         .iter()
-        .map(|fit| render_all(&fit.material, &fit.exposed(&records), args.options.seed))
+        .map(|fit| render_all(&fit.material, &fit.exposed(records), args.options.seed))
         .collect();
     let exposure = display_exposure(&records.target);
-    let scale = residual_scale(&records, &predictions);
+    let scale = residual_scale(records, &predictions);
     let mut region_lines = Vec::new();
-    for (fit, predicted) in fits.iter().zip(&predictions) {
+    for (chosen, (fit, predicted)) in fits.iter().zip(&predictions).enumerate() {
         let model = fit.material.model;
         let model_folder = root.join(model.name());
         std::fs::create_dir(&model_folder).map_err(|e| Error::io(&model_folder, e))?;
-        write_model_images(&root, model, &records, predicted, exposure, scale)?;
-        let region = region
+        write_model_images(&root, model, records, predicted, exposure, scale)?;
+        let region = done
+            .region
             .as_ref()
-            .map(|applied| RegionReport::new(applied, &records, predicted));
+            .map(|applied| RegionReport::new(applied, records, predicted));
         region_lines.extend(region.as_ref().map(|r| format!("{model}: {}", r.summary())));
         FitFile::new(
-            fit,
             fits,
-            &selection,
+            chosen,
+            selection,
             run,
             (&args.capture, &capture),
-            &records,
-            &args.options,
+            records,
+            &options,
         )
         .with_region(region)
         .write(&model_folder.join("fit.json"))?;
     }
 
-    let mut verdicts = Report::verdicts(&selection, held_out_ranking.as_ref(), &rows);
+    let mut verdicts = Report::verdicts(selection, held_out_ranking.as_ref(), &rows);
     verdicts.extend(region_lines);
     // What a fit may have got wrong (another basin as good, a bound) stands in the verdicts.
     verdicts.extend(fits.iter().flat_map(|fit| {
@@ -188,7 +185,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         loss_kind: args.options.loss,
         holdout_folds: holdout,
         models: rows,
-        selection,
+        selection: selection.clone(),
         held_out_ranking,
         residual_scale: scale,
         verdicts,

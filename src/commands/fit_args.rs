@@ -1,5 +1,6 @@
 //! The arguments of `fit`, in the groups `compare` and `bench` share ([`FitOptionArgs`],
-//! [`RealCaptureArgs`], [`McmcArgs`], [`MapsArgs`]), and the library options they stand for.
+//! [`RealCaptureArgs`], [`McmcArgs`], [`MapsArgs`]), and the library options they stand for:
+//! [`PipelineOptions`] of a uniform fit.
 
 use super::output::check_overwrite;
 use crate::bsdf::Model;
@@ -8,6 +9,7 @@ use crate::error::Result;
 use crate::fit::bayes::mcmc::McmcOptions;
 use crate::fit::bayes::model_error::ModelError;
 use crate::fit::bayes::sampler::Schedule;
+use crate::fit::pipeline::{PipelineOptions, RegionSource};
 use crate::fit::point::objective::GradientMethod;
 use crate::fit::point::params::{FresnelFamily, ParamSpace};
 use crate::fit::point::StochasticFit;
@@ -173,11 +175,11 @@ impl RealCaptureArgs {
     }
 
     /// The region of `--region` or `--mask`, if any.
-    pub(super) fn region(&self) -> Result<Option<SampleRegion>> {
+    pub(super) fn region(&self) -> Option<RegionSource> {
         match (&self.region, &self.mask) {
-            (Some(region), _) => Ok(Some(region.clone())),
-            (None, Some(mask)) => SampleRegion::load_mask(mask).map(Some),
-            (None, None) => Ok(None),
+            (Some(region), _) => Some(RegionSource::Given(region.clone())),
+            (None, Some(mask)) => Some(RegionSource::Mask(mask.clone())),
+            (None, None) => None,
         }
     }
 }
@@ -303,15 +305,39 @@ impl FitOptionArgs {
         }
     }
 
-    /// The library options of `--mcmc` over `models` (MAP starts use these fit options).
-    pub(super) fn mcmc_options(
+    /// The library options of a uniform fit of `models` (`fit`, `compare`) and, with `--mcmc`,
+    /// of the posterior over them, its checkpoint by default `output` with extension
+    /// `.mcmc-checkpoint.json`; `force` replaces a checkpoint an interrupted run left.
+    pub fn pipeline_options(
         &self,
-        mcmc: &McmcArgs,
         models: &[Model],
-        checkpoint: PathBuf,
-    ) -> McmcOptions {
+        mcmc: &McmcArgs,
+        output: &Path,
+        progress: bool,
+        force: bool,
+    ) -> PipelineOptions {
+        let candidates: Vec<FitOptions> = models
+            .iter()
+            .map(|&model| self.fit_options(model, progress))
+            .collect();
+        let mcmc = match candidates.first() {
+            Some(first) if mcmc.mcmc => Some(self.mcmc_options(mcmc, first.clone(), output)),
+            _ => None,
+        };
+        PipelineOptions {
+            candidates,
+            pixel_samples: self.pixel_samples,
+            region: self.real.region(),
+            mcmc,
+            replace_checkpoint: force,
+        }
+    }
+
+    /// The library options of `--mcmc`, its MAP starts fitted with `map` (each candidate's
+    /// space in place of its own).
+    fn mcmc_options(&self, mcmc: &McmcArgs, map: FitOptions, output: &Path) -> McmcOptions {
         McmcOptions {
-            map: self.fit_options(models[0], true),
+            map,
             schedule: Schedule {
                 chains: mcmc.chains,
                 warmup: mcmc.mcmc_warmup,
@@ -322,7 +348,11 @@ impl FitOptionArgs {
             pixels: mcmc.mcmc_pixels,
             model_error: mcmc.model_error,
             discrepancy_floor: mcmc.discrepancy_floor,
-            checkpoint: Some(checkpoint),
+            checkpoint: Some(
+                mcmc.checkpoint
+                    .clone()
+                    .unwrap_or_else(|| output.with_extension("mcmc-checkpoint.json")),
+            ),
             resume: mcmc.resume,
             stop_after: mcmc.mcmc_stop_after,
             mode_starts: Vec::new(),

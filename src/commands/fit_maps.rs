@@ -3,14 +3,15 @@
 //! `normal.png`) plus residual images, every output staged and committed at the end. Pixels are
 //! evaluated at their centre (one sub-sample), so each sees exactly one texel.
 
-use super::fit::{load_records, residuals};
 use super::fit_args::{FitArgs, FitOptionArgs, MapsArgs};
 use super::images::{display_exposure, write_photo_images};
+use super::inputs::print_warning;
 use super::output::StagedFolder;
 use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::fit::fit_model;
+use crate::fit::pipeline::load_records;
 use crate::fit::point::exposure::exposed_records;
 use crate::fit::point::params::FresnelFamily;
 use crate::loss::LossKind;
@@ -44,7 +45,7 @@ pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
     if !args.quiet {
         summarise(&run.fit, run.holdout.as_ref());
     }
-    let residual = residuals(&run.predicted, &run.records);
+    let residual = run.records.residuals(&run.predicted);
     let display = display_exposure(&run.records.target);
     write_photo_images(
         &residual_folder.path(""),
@@ -139,7 +140,13 @@ impl MapsSet {
                 height: (height as usize).max(1),
             }
         });
-        let (records, _) = load_records(capture_path, &capture, &options)?;
+        let (records, _) = load_records(
+            capture_path,
+            &capture,
+            options.pixel_samples,
+            options.real.region().as_ref(),
+            &print_warning,
+        )?;
         let photos = records.photos.len();
         if let Some(h) = maps.holdout_photo.filter(|&h| h >= photos) {
             return Err(Error::argument(

@@ -38,6 +38,12 @@ pub fn load_any_material(path: &Path) -> Result<AnyMaterial> {
 
 fn print_warnings(warnings: &[String]) {
     for warning in warnings {
-        eprintln!("warning: {warning}");
+        print_warning(warning);
     }
+}
+
+/// Prints a warning about the inputs (of the library, e.g. [`crate::fit::pipeline::load_records`])
+/// on stderr.
+pub fn print_warning(warning: &str) {
+    eprintln!("warning: {warning}");
 }
