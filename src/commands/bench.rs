@@ -11,7 +11,7 @@
 //! `--max-iters`), and `--seed` seeds everything.
 
 use super::fit_args::{FitOptionArgs, MapsArgs};
-use super::fit_maps::MapsSet;
+use super::inputs::print_warning;
 use super::output::StagedFolder;
 use crate::bench::cpu_time::process_seconds;
 use crate::bench::estimators::{self, EstimatorRow, EstimatorSettings, ALPHA_RANGE};
@@ -24,6 +24,7 @@ use crate::error::{Error, Result};
 use crate::fit::point::params::FresnelFamily;
 use crate::fit::FitOptions;
 use crate::maps::fit::check_model;
+use crate::maps::pipeline::MapsSet;
 use crate::maps::TexelGrid;
 use crate::material::Material;
 use crate::progress::Progress;
@@ -298,7 +299,7 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
             }
             m.sets
                 .iter()
-                .map(|path| maps_set(path, &args.fit, m.max_bases))
+                .map(|path| maps_set(path, args, m))
                 .collect::<Result<Vec<_>>>()?
         }
         None => Vec::new(),
@@ -391,7 +392,7 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
                         );
                     }
                     let (started, cpu) = (Instant::now(), process_seconds());
-                    let run = set.fit(model, !args.quiet)?;
+                    let run = set.fit(model)?;
                     let mut row = JobRow::maps_fit(
                         model,
                         &set.records,
@@ -440,18 +441,20 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// A photo set of the maps fit jobs, its last photo held out, at most `max_bases` bases.
-fn maps_set(path: &Path, fit: &FitOptionArgs, max_bases: usize) -> Result<MapsSet> {
-    let capture = fit.real.open(path)?;
+/// A photo set of the maps fit jobs, its last photo held out, at most `m.max_bases` bases.
+fn maps_set(path: &Path, args: &BenchArgs, m: &MapsSettings) -> Result<MapsSet> {
+    let capture = args.fit.real.open(path)?;
     let last = capture.photos.len().saturating_sub(1);
     let maps = MapsArgs {
         maps: true,
         texels: None,
         normals: crate::maps::fit::Normals::Off,
-        bases: max_bases,
+        bases: m.max_bases,
         holdout_photo: Some(last),
     };
-    MapsSet::new(path, capture, fit, &maps)
+    // Each maps fit takes the options of the first model with its own model.
+    let options = args.fit.maps_options(m.models[0], &maps, !args.quiet);
+    MapsSet::new(path, capture, options, &print_warning)
 }
 
 /// What the numbers mean and what this run left out.

@@ -10,12 +10,12 @@
 //! | `--mcmc` and its options | one sampler run over all models with jumps between them (as `fit --mcmc`): each row gains its posterior probability and 95% intervals, and `posterior.png` is drawn; checkpoint `<REPORT_DIR>.mcmc-checkpoint.json` |
 //! | fit options | as `fit` ([`FitOptionArgs`]) |
 //! | `-o REPORT_DIR` | staged and renamed into place; an existing non-empty folder needs `--force` |
-//! | `--maps` and its options (`--texels`, `--normals`, `--bases`, `--holdout-photo N`) | fit each model as material maps ([`super::fit_maps`]) and write the maps report ([`crate::report::maps`]): the maps side by side, re-renders and residuals of every photo, the held-out photo's error, and each multi-bounce model minus `single` per texel and per basis material. `--holdout K` and `--mcmc` are refused (a maps fit holds out one photo) |
+//! | `--maps` and its options (`--texels`, `--normals`, `--bases`, `--holdout-photo N`) | fit each model as material maps ([`crate::maps::pipeline`], as `fit --maps`) and write the maps report ([`crate::report::maps`]): the maps side by side, re-renders and residuals of every photo, the held-out photo's error, and each multi-bounce model minus `single` per texel and per basis material. `--holdout K` and `--mcmc` are refused (a maps fit holds out one photo) |
 
 use super::fit::fit_photo_set;
 use super::fit_args::{FitOptionArgs, MapsArgs, McmcArgs};
-use super::fit_maps::{MapsRun, MapsSet};
 use super::images::display_exposure;
+use super::inputs::print_warning;
 use super::output::StagedFolder;
 use crate::bsdf::Model;
 use crate::capture::atomic_file::write_atomically;
@@ -25,6 +25,7 @@ use crate::fit::bayes::selection::{HeldOutErrors, HeldOutRanking};
 use crate::fit::fit_file::{FitFile, RegionReport};
 use crate::maps::compare::MapsDifference;
 use crate::maps::fit::check_model;
+use crate::maps::pipeline::{MapsRun, MapsSet};
 use crate::render::render_all;
 use crate::report::images::{residual_scale, write_model_images};
 use crate::report::maps::{
@@ -246,13 +247,17 @@ fn run_maps_compare(args: &CompareArgs) -> Result<()> {
     }
     let capture = args.options.real.open(&args.capture)?;
     let folder = StagedFolder::new(&args.output, args.force)?;
-    let set = MapsSet::new(&args.capture, capture, &args.options, &args.maps)?;
+    // Each maps fit takes the options of the first model with its own model.
+    let options = args
+        .options
+        .maps_options(args.models[0], &args.maps, !args.quiet);
+    let set = MapsSet::new(&args.capture, capture, options, &print_warning)?;
     let mut runs: Vec<MapsRun> = Vec::new();
     for &model in &args.models {
         if !args.quiet {
             eprintln!("{model}: maps fit");
         }
-        runs.push(set.fit(model, !args.quiet)?);
+        runs.push(set.fit(model)?);
     }
 
     let root = folder.path("");

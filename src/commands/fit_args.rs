@@ -1,6 +1,6 @@
 //! The arguments of `fit`, in the groups `compare` and `bench` share ([`FitOptionArgs`],
 //! [`RealCaptureArgs`], [`McmcArgs`], [`MapsArgs`]), and the library options they stand for:
-//! [`PipelineOptions`] of a uniform fit.
+//! [`PipelineOptions`] of a uniform fit, [`MapsOptions`] of a maps fit.
 
 use super::output::check_overwrite;
 use crate::bsdf::Model;
@@ -16,6 +16,7 @@ use crate::fit::point::StochasticFit;
 use crate::fit::{FitOptions, Optimizer};
 use crate::loss::LossKind;
 use crate::maps::fit::Normals;
+use crate::maps::pipeline::MapsOptions;
 use crate::maps::TexelGrid;
 use crate::material::FresnelSpec;
 use crate::microfacet::{Height, NdfKind};
@@ -175,7 +176,7 @@ impl RealCaptureArgs {
     }
 
     /// The region of `--region` or `--mask`, if any.
-    pub(super) fn region(&self) -> Option<RegionSource> {
+    fn region(&self) -> Option<RegionSource> {
         match (&self.region, &self.mask) {
             (Some(region), _) => Some(RegionSource::Given(region.clone())),
             (None, Some(mask)) => Some(RegionSource::Mask(mask.clone())),
@@ -273,7 +274,7 @@ fn parse_texels(text: &str) -> std::result::Result<TexelGrid, String> {
 
 impl FitOptionArgs {
     /// The parameter space of `model` under these options.
-    pub fn space(&self, model: Model) -> ParamSpace {
+    fn space(&self, model: Model) -> ParamSpace {
         ParamSpace {
             model,
             ndf: self.ndf,
@@ -356,6 +357,19 @@ impl FitOptionArgs {
             resume: mcmc.resume,
             stop_after: mcmc.mcmc_stop_after,
             mode_starts: Vec::new(),
+        }
+    }
+
+    /// The library options of a maps fit with these options and `maps`; `model` is the one the
+    /// uniform fit options name (a maps fit of another model takes them with its own).
+    pub fn maps_options(&self, model: Model, maps: &MapsArgs, progress: bool) -> MapsOptions {
+        MapsOptions {
+            fit: self.fit_options(model, progress),
+            region: self.real.region(),
+            texels: maps.texels,
+            normals: maps.normals,
+            bases: maps.bases,
+            holdout_photo: maps.holdout_photo,
         }
     }
 }

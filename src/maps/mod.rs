@@ -21,11 +21,13 @@
 //! `normalmap` BSDF and glTF's `normalTexture` do the same.
 //!
 //! The files (JSON plus images) are read and written by [`files`]; [`render`] evaluates maps over
-//! shading records; [`fit`] fits maps to a photo set.
+//! shading records; [`fit`] fits maps to a photo set; [`pipeline`] runs that fit on a photo set
+//! as the commands do (records, held-out photo, exposure, prediction, the fit file's fields).
 
 pub mod compare;
 pub mod files;
 pub mod fit;
+pub mod pipeline;
 pub mod render;
 
 use crate::material::{FresnelSpec, Material};

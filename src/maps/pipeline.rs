@@ -1,0 +1,291 @@
+//! The maps fit of a photo set, as `fit --maps`, `compare --maps` and `bench` run it, without the
+//! command line: a [`MapsSet`] loads the records once (one centre sub-sample per pixel, so each
+//! pixel sees exactly one texel) and checks the options; [`MapsSet::fit`] fits one model's maps
+//! ([`super::fit::fit_maps`]) to every photo but the held-out one and predicts every photo;
+//! [`MapsSet::fit_file_fields`] are what the maps fit file adds to the maps. Nothing here prints.
+
+use super::fit::{fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions, Normals};
+use super::render::render_maps;
+use super::TexelGrid;
+use crate::bsdf::Model;
+use crate::capture::Capture;
+use crate::error::{Error, Result};
+use crate::fit::pipeline::{load_records, RegionSource};
+use crate::fit::point::exposure::exposed_records;
+use crate::fit::point::params::{FresnelFamily, ParamSpace};
+use crate::fit::{fit_model, FitOptions};
+use crate::loss::LossKind;
+use crate::shading::{PhotoSpan, ShadingRecords};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+
+/// Sub-samples per pixel of a maps fit: one, at the pixel's centre, so that each pixel sees
+/// exactly one texel.
+const PIXEL_SAMPLES: usize = 1;
+
+/// How a photo set is fitted as material maps.
+#[derive(Clone, Debug)]
+pub struct MapsOptions {
+    /// How a uniform fit of the photos runs, for a fitted exposure (`space.exposure`), and what
+    /// the maps fits share with it: distribution, heights, anisotropy, known Fresnel, progress
+    /// and seed. Each fit takes these with its own model in place of `space.model`.
+    pub fit: FitOptions,
+    /// The part of the sample to fit; all of it without.
+    pub region: Option<RegionSource>,
+    /// The texel grid (default: the first photo's width, the height in the sample's
+    /// proportions).
+    pub texels: Option<TexelGrid>,
+    pub normals: Normals,
+    /// Most basis materials tried.
+    pub bases: usize,
+    /// The photo (0-based, capture order) left out of the fit, whose prediction is reported.
+    pub holdout_photo: Option<usize>,
+}
+
+impl MapsOptions {
+    /// The uniform fit options of `model`.
+    fn uniform(&self, model: Model) -> FitOptions {
+        FitOptions {
+            space: ParamSpace {
+                model,
+                ..self.fit.space
+            },
+            ..self.fit.clone()
+        }
+    }
+}
+
+/// A photo set prepared for maps fits, with what every model's fit of it shares (`fit --maps`
+/// fits one model, `compare --maps` several, `bench` times them): the records, the texel grid
+/// and the options.
+pub struct MapsSet {
+    pub capture_path: PathBuf,
+    pub capture: Capture,
+    /// Records before any fitted exposure.
+    pub records: ShadingRecords,
+    pub grid: TexelGrid,
+    pub options: MapsOptions,
+}
+
+/// One model's maps fit of a [`MapsSet`].
+pub struct MapsRun {
+    pub model: Model,
+    pub fit: MapsFit,
+    /// The exposure fitted with `--fit-exposure`.
+    pub exposure: Option<f64>,
+    /// The set's records under that exposure.
+    pub records: ShadingRecords,
+    /// The maps' radiance at every pixel of every photo, the held-out one included.
+    pub predicted: Vec<[f64; 3]>,
+    pub holdout: Option<HeldOutPhoto>,
+}
+
+/// Refuses the fit options that would change what maps are fitted but that a maps fit has no
+/// use for: it fits Schlick F0 per texel (or the known Fresnel) by its own weighted squared
+/// error ([`crate::maps::fit`]). Before, it ignored them without a word.
+fn check_options(options: &FitOptions) -> Result<()> {
+    if options.space.fresnel != FresnelFamily::Schlick && options.space.known_fresnel.is_none() {
+        return Err(Error::argument(
+            "--fresnel",
+            "a maps fit takes Schlick F0 per texel; for maps of a known conductor give \
+             --fresnel-known conductor:ETA:K",
+        ));
+    }
+    if options.loss != LossKind::L2 {
+        return Err(Error::argument(
+            "--loss",
+            "a maps fit minimises the weighted squared error (l2); the other losses are for \
+             uniform fits",
+        ));
+    }
+    Ok(())
+}
+
+impl MapsSet {
+    /// Loads the records of `capture` (telling `warn` what [`load_records`] warns of) and
+    /// checks the options against it (the held-out photo exists, enough photos remain to
+    /// fit); nothing is fitted yet.
+    pub fn new(
+        capture_path: &Path,
+        capture: Capture,
+        options: MapsOptions,
+        warn: &dyn Fn(&str),
+    ) -> Result<MapsSet> {
+        check_options(&options.fit)?;
+        let grid = options.texels.unwrap_or_else(|| {
+            let width = capture.photos[0].camera.resolution()[0];
+            let height = (width as f64 * capture.sample.height / capture.sample.width).round();
+            TexelGrid {
+                width,
+                height: (height as usize).max(1),
+            }
+        });
+        let (records, _) = load_records(
+            capture_path,
+            &capture,
+            PIXEL_SAMPLES,
+            options.region.as_ref(),
+            warn,
+        )?;
+        let photos = records.photos.len();
+        if let Some(h) = options.holdout_photo.filter(|&h| h >= photos) {
+            return Err(Error::argument(
+                "--holdout-photo",
+                format!(
+                    "photo {h} does not exist; the set has photos 0 to {}",
+                    photos - 1
+                ),
+            ));
+        }
+        if photos < 2 + usize::from(options.holdout_photo.is_some()) {
+            return Err(Error::invalid(
+                capture_path,
+                "photos",
+                "a maps fit needs at least two photos to fit (and one more to hold out)",
+            ));
+        }
+        Ok(MapsSet {
+            capture_path: capture_path.to_path_buf(),
+            capture,
+            records,
+            grid,
+            options,
+        })
+    }
+
+    /// Fits maps of `model` to the photos (all but the held-out one) and predicts every photo.
+    pub fn fit(&self, model: Model) -> Result<MapsRun> {
+        let options = &self.options;
+        let uniform = options.uniform(model);
+        // A fitted exposure comes from the uniform fit of the same photos (with the known
+        // Fresnel): the maps' per-texel albedo would absorb it otherwise.
+        let exposure = if uniform.space.exposure {
+            uniform
+                .space
+                .check()
+                .map_err(|m| Error::argument("--fit-exposure", m))?;
+            let fit = fit_model(&self.records, &uniform)?;
+            Some(fit.exposure.as_ref().map_or(1.0, |e| e.value))
+        } else {
+            None
+        };
+        let records = exposed_records(&self.records, exposure.unwrap_or(1.0)).into_owned();
+        let photos = records.photos.len();
+        let holdout = options.holdout_photo;
+        let training = match holdout {
+            Some(h) => records.restricted_to_photos(|i| i != h),
+            None => records.clone(),
+        };
+        let validation_photo = (0..photos).rev().find(|&i| Some(i) != holdout);
+        let fit = fit_maps(
+            &training,
+            &MapsFitOptions {
+                model,
+                ndf: uniform.space.ndf,
+                height: uniform.space.height,
+                known_fresnel: uniform.space.known_fresnel,
+                anisotropic: uniform.space.anisotropic,
+                grid: self.grid,
+                normals: options.normals,
+                max_bases: options.bases,
+                validation_photo,
+                progress: uniform.progress,
+            },
+        )?;
+        let all: Vec<usize> = (0..records.pixel_count()).collect();
+        let predicted = render_maps(&fit.maps, &records, &all, uniform.seed)?;
+        let holdout = holdout.map(|h| {
+            let pixels: Vec<usize> = records.photos[h]
+                .pixels()
+                .filter(|&p| records.weight[p] > 0.0)
+                .collect();
+            let values: Vec<[f64; 3]> = pixels.iter().map(|&p| predicted[p]).collect();
+            HeldOutPhoto {
+                photo: h,
+                stem: records.photos[h].stem.clone(),
+                relative_error: relative_error(&values, &records, &pixels),
+                mean_photo_error: mean_photo_error(&records, h),
+            }
+        });
+        Ok(MapsRun {
+            model,
+            fit,
+            exposure,
+            records,
+            predicted,
+            holdout,
+        })
+    }
+
+    /// The fields a maps fit file adds to the material (`maps_fit`, `texels`, `holdout`,
+    /// `exposure`, the capture's).
+    pub fn fit_file_fields(&self, run: &MapsRun) -> serde_json::Map<String, serde_json::Value> {
+        let grid = self.grid;
+        let mut extra = serde_json::Map::new();
+        extra.insert(
+            "maps_fit".into(),
+            serde_json::to_value(&run.fit).expect("serialisable"),
+        );
+        extra.insert("texels".into(), json!([grid.width, grid.height]));
+        if let Some(report) = &run.holdout {
+            extra.insert(
+                "holdout".into(),
+                serde_json::to_value(report).expect("serialisable"),
+            );
+        }
+        if let Some(exposure) = run.exposure {
+            extra.insert("exposure".into(), json!({"value": exposure}));
+        }
+        extra.insert(
+            "capture".into(),
+            json!(self.capture_path.display().to_string()),
+        );
+        extra.insert("capture_name".into(), json!(self.capture.name));
+        extra.insert("pixel_samples".into(), json!(PIXEL_SAMPLES));
+        extra.insert(
+            "excluded".into(),
+            serde_json::to_value(run.records.excluded).expect("serialisable"),
+        );
+        extra.insert("seed".into(), json!(self.options.fit.seed));
+        extra.insert("version".into(), json!(env!("CARGO_PKG_VERSION")));
+        extra
+    }
+}
+
+/// The naive baseline of a held-out photo: the relative error of predicting it by the mean of
+/// the other photos at the same pixel (rectified photos of one size; `null` otherwise), over
+/// the pixels usable in all of them.
+fn mean_photo_error(records: &ShadingRecords, held_out: usize) -> Option<f64> {
+    let span = &records.photos[held_out];
+    let others: Vec<&PhotoSpan> = (0..records.photos.len())
+        .filter(|&i| i != held_out)
+        .map(|i| &records.photos[i])
+        .collect();
+    if others
+        .iter()
+        .any(|o| (o.width, o.height) != (span.width, span.height))
+    {
+        return None;
+    }
+    let (mut error, mut signal) = (0.0, 0.0);
+    for i in 0..span.width * span.height {
+        let p = span.first_pixel + i;
+        if records.weight[p] == 0.0
+            || others
+                .iter()
+                .any(|o| records.weight[o.first_pixel + i] == 0.0)
+        {
+            continue;
+        }
+        for c in 0..3 {
+            let mean = others
+                .iter()
+                .map(|o| records.target[o.first_pixel + i][c])
+                .sum::<f64>()
+                / others.len() as f64;
+            error += (mean - records.target[p][c]).powi(2);
+            signal += records.target[p][c].powi(2);
+        }
+    }
+    (signal > 0.0).then(|| (error / signal).sqrt())
+}
