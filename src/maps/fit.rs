@@ -12,11 +12,11 @@
 //!
 //! | stage | what | how |
 //! | --- | --- | --- |
-//! | 1 | each texel alone, weak prior toward a generic material | Levenberg-Marquardt per texel from three roughness starts (0.05, 0.2, 0.6) |
+//! | 1 | each texel alone, weak prior toward a generic material (a metal's F0 where measured conductors' are, [`METAL_F0_LOGIT`]) | Levenberg-Marquardt per texel from three roughness starts (0.05, 0.2, 0.6) |
 //! | 2 | noise level | `sigma^2 = sum r^2 / (residuals - parameters)` of stage 1, so the data term is a Gaussian log-likelihood and the prior's units are those of the coordinates |
 //! | 3 | `K` basis materials | k-means over the texels' specular coordinates (`ln alpha`, `logit F0`), each coordinate weighted by its Gauss-Newton precision `(J^T J)_jj` (a texel's diagonal Laplace approximation), so poorly seen texels hardly move the bases and are assigned by what is seen of them |
-//! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; each texel as either kind (a texel of the basis's other kind takes only its roughness), from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own; the texels' priors are centred on the precision-weighted means of their basis's texels, and the bases reported are then re-estimated by maximum likelihood on the photos of their texels of their kind together (Gauss-Newton, each texel with its own albedo, [`pooled_centre`]), since that mean is biased low under noise |
-//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels and at their resolution ([`texel_relative_error`]); of the `K` within 2% of the best error, the one with the lowest BIC of its clustering ([`fewest_good_bases`]; blends of two bases, bases that do not pay for themselves in that BIC and bases left with under 1% of the texels are dropped, [`Clusters::drop_non_materials`], [`take_negligible_bases_texels`], [`Clusters::drop_empty`]), with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
+//! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; each texel as either kind (a texel of the basis's other kind takes only its roughness), from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own; the texels' priors are centred on the precision-weighted means of their basis's texels, and the bases reported are then re-estimated by maximum likelihood on the photos of their texels of their kind together (Gauss-Newton, each texel's own albedo re-fitted with it, texels the basis cannot explain left out, [`pooled_centre`]), since that mean is biased low under noise |
+//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels and at their resolution ([`texel_relative_error`]); of the `K` within 2% of the best error, the one with the lowest BIC of its clustering ([`fewest_good_bases`]; blends of two bases, bases that do not pay for themselves in that BIC and bases left with under 1% of the texels or covering no 2 x 2 block of them are dropped, [`Clusters::drop_non_materials`], [`take_negligible_bases_texels`], [`Clusters::drop_empty`]), with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
 //!
 //! Texels are independent given the bases, so each is a small dense problem (4 to 10
 //! coordinates: `ln alpha` (with `anisotropic`, `ln alpha_x` and `ln alpha_y`, each with the
@@ -61,6 +61,15 @@ const SIGMA_SLOPE: f64 = 0.25;
 /// 0.3: F0 0.03 to 0.055 at one sd).
 const DIELECTRIC_F0: f64 = 0.04;
 const SIGMA_DIELECTRIC_F0: f64 = 0.3;
+/// A metal's F0 where nothing else is known of it: `logit F0` drawn toward 1.13 (F0 0.76) with
+/// sd 1.46, the mean and spread of `logit F0` over the 27 normal-incidence reflectances (450,
+/// 550 and 650 nm) of the nine conductors of `../shared/data/conductors_nk.json` (Cu, Au, Ag,
+/// Al, Cr, Ni, Ti, Fe, W: 0.41 to 0.99). Before, a metal's F0 was free (logit sd 3 about 0.5),
+/// and a dark dielectric fitted as a grey metal of F0 0.13 as well as it fitted as what it is:
+/// a rubber band (F0 0.04, albedo 0.05) became such a metal at one pixel per texel and was
+/// lost as a basis (docs/maps.md, "A truth these changes were not made on").
+const METAL_F0_LOGIT: f64 = 1.13;
+const SIGMA_METAL_F0: f64 = 1.46;
 /// A metal's diffuse albedo: logit(1e-4) with sd 1, i.e. none.
 const METAL_DIFFUSE: f64 = 1e-4;
 const SIGMA_METAL_DIFFUSE: f64 = 1.0;
@@ -670,8 +679,8 @@ impl TexelModel<'_> {
         }
     }
 
-    /// The data term of `pixels` at `x` (`prior` adds to it): `(data cost, half gradient,
-    /// half Gauss-Newton matrix)`, the matrix row-major `dim x dim`.
+    /// The cost of `pixels` at `x` under `prior`: `(cost, half gradient, half Gauss-Newton
+    /// matrix)`, the matrix row-major `dim x dim`.
     fn linearised_any(
         &self,
         x: &[f64],
@@ -682,7 +691,7 @@ impl TexelModel<'_> {
         fn parts<const N: usize>(l: Linearised<N>) -> (f64, Vec<f64>, Vec<f64>) {
             let matrix = l.matrix.transpose();
             (
-                l.data_cost,
+                l.cost,
                 l.gradient.as_slice().to_vec(),
                 matrix.as_slice().to_vec(),
             )
@@ -724,7 +733,7 @@ impl TexelModel<'_> {
                 for c in r..r + 3 {
                     (centre[c], sd[c]) = match kind {
                         Kind::Dielectric => (specular[c], SIGMA_DIELECTRIC_F0.min(sigma[1])),
-                        _ => (specular[c], sigma[1]),
+                        _ => (specular[c], SIGMA_METAL_F0.min(sigma[1])),
                     };
                 }
                 r + 3
@@ -744,7 +753,7 @@ impl TexelModel<'_> {
     }
 
     /// Stage 1's prior of `kind`: roughness near 0.3 (weakly), a dielectric's F0 near 0.04, a
-    /// metal's F0 anywhere.
+    /// metal's where measured conductors' are ([`METAL_F0_LOGIT`]).
     fn generic_prior(&self, kind: Kind) -> Prior {
         let roughness = vec![GENERIC_ALPHA.ln(); self.roughness_dim()];
         self.prior(
@@ -756,11 +765,11 @@ impl TexelModel<'_> {
 
     /// The specular coordinates a texel of `kind` is drawn toward when nothing else is known
     /// of its F0: the roughness coordinates `roughness`, then a dielectric's F0 (0.04) or a
-    /// metal's 0.5.
+    /// metal's (0.76).
     fn generic_specular(&self, kind: Kind, roughness: &[f64]) -> Vec<f64> {
         let f0 = match kind {
             Kind::Dielectric => logit(DIELECTRIC_F0),
-            _ => 0.0,
+            _ => METAL_F0_LOGIT,
         };
         let mut specular = roughness.to_vec();
         specular.extend([f0; 3]);
@@ -1183,7 +1192,7 @@ fn basis_fits(
                 })
                 .collect();
             clusters.assignment = label_smoothing(&candidates, blocks);
-            take_negligible_bases_texels(&mut clusters.assignment, &candidates, seen.len());
+            take_negligible_bases_texels(&mut clusters.assignment, &candidates, blocks, seen.len());
             texels = candidates
                 .into_iter()
                 .zip(&clusters.assignment)
@@ -1244,12 +1253,15 @@ fn basis_fits(
 /// 0.2% with `single` at 32^2.
 const NEGLIGIBLE_SHARE: f64 = 0.01;
 
-/// Gives each texel labelled with a basis of under [`NEGLIGIBLE_SHARE`] of the `seen` texels
-/// the kept basis under which its posterior (`candidates`, as in [`basis_fits`]) is least; the
-/// emptied bases are then dropped with the empty ones ([`Clusters::drop_empty`]).
+/// Gives each texel labelled with a basis that is not a material the kept basis under which
+/// its posterior (`candidates`, as in [`basis_fits`]) is least; the emptied bases are then
+/// dropped with the empty ones ([`Clusters::drop_empty`]). A basis is not a material when it
+/// holds under [`NEGLIGIBLE_SHARE`] of the `seen` texels or covers no area
+/// ([`covers_an_area`]).
 fn take_negligible_bases_texels(
     labels: &mut [usize],
     candidates: &[Vec<(f64, TexelFit)>],
+    blocks: &TexelBlocks,
     seen: usize,
 ) {
     let k = candidates.first().map_or(0, Vec::len);
@@ -1260,7 +1272,10 @@ fn take_negligible_bases_texels(
     }
     let kept: Vec<bool> = counts
         .iter()
-        .map(|&c| c as f64 >= NEGLIGIBLE_SHARE * seen as f64)
+        .enumerate()
+        .map(|(b, &c)| {
+            c as f64 >= NEGLIGIBLE_SHARE * seen as f64 && covers_an_area(labels, blocks, b)
+        })
         .collect();
     if !kept.iter().any(|&k| k) {
         return;
@@ -1275,22 +1290,65 @@ fn take_negligible_bases_texels(
     }
 }
 
+/// Whether some 2 x 2 block of seen texels is all labelled `basis`. The texels astride the
+/// edge between two materials, each holding some of both, form a line one texel wide (a
+/// staircase along a slanted edge), which holds no such block; a material at least two texels
+/// wide does. On the untuned truth of docs/maps.md at 32^2 (256^2 photos), the texels along a
+/// copper square's edge beside a glossy ceramic (1.1% of them) were fitted as a sharp metal of
+/// F0 0.96 and kept as a fourth basis: the validation photo preferred it (error 0.0051 against
+/// 0.0056), as it prefers any basis that fits mixed texels better. On stage 5's texel sample
+/// (every other texel of every other row) a line and a band three texels wide look alike, so
+/// there every basis covers an area and the rule waits for the fit on every texel: the
+/// untuned truth's rubber band, three texels wide at 16^2, was dropped there.
+fn covers_an_area(labels: &[usize], blocks: &TexelBlocks, basis: usize) -> bool {
+    if blocks.stride > 1 {
+        return true;
+    }
+    let w = blocks.grid.width;
+    let own = |t: usize| labels[t] == basis && !blocks.of(t).is_empty();
+    (0..blocks.grid.height.saturating_sub(1)).any(|r| {
+        (0..w - 1).any(|c| {
+            let t = r * w + c;
+            own(t) && own(t + 1) && own(t + w) && own(t + w + 1)
+        })
+    })
+}
+
 /// Gauss-Newton steps of [`pooled_centre`] at most, each backtracking at most
 /// `POOLED_HALVINGS` times.
 const POOLED_STEPS: usize = 10;
 const POOLED_HALVINGS: usize = 6;
+
+/// The cost per residual, as a multiple of the median over a basis's texels, above which
+/// [`pooled_centre`] leaves a texel out. With the noise level right, a texel's cost is a
+/// chi-square with as many degrees of freedom as residuals (3 per pixel of each photo, 30 or
+/// more with 10 photos), which exceeds 4 times its median with a probability below 1e-6; a
+/// wrong noise level scales every texel's cost alike. The texels astride the edge of the
+/// untuned truth's rubber band (docs/maps.md) cost 500-1000 times the median at 64^2, and
+/// the worst 5% of the texels held 92% of the pooled cost: a maximum-likelihood estimate over
+/// all of them is theirs.
+const OUTLIER_RATIO: f64 = 4.0;
 
 /// [`pooled_centre`] stops after a step below this in every coordinate (`ln alpha`, `logit
 /// F0`): 1e-4 relative in alpha.
 const POOLED_TOLERANCE: f64 = 1e-4;
 
 /// Basis `b`'s specular coordinates `centre` re-estimated by maximum likelihood from the
-/// photos of its texels of its own `kind` together: each texel at the basis's specular
-/// coordinates with its own diffuse albedo (and slopes), Gauss-Newton steps on the sum of
-/// their data terms from the precision-weighted mean of their estimates
-/// ([`Clusters::recentre`]). That mean is biased under noise: a texel fitted sharper than the
-/// truth has a larger derivative in `ln alpha`, so more precision, and pulls the mean down
-/// (docs/maps.md, "Noisy photos").
+/// photos of its texels of its own `kind` together ([`OUTLIER_RATIO`] leaves out those it
+/// cannot explain): every texel at the basis's specular coordinates, each with its own
+/// diffuse albedo (and slopes), all solved together by Gauss-Newton steps from the
+/// precision-weighted mean of their estimates ([`Clusters::recentre`]). Each step eliminates
+/// every texel's own coordinates by its Schur complement (the reduced camera system of bundle
+/// adjustment: Triggs et al. 2000, "Bundle adjustment: a modern synthesis", section 6.1).
+///
+/// The weighted mean is biased under noise: a texel fitted sharper than the truth has a
+/// larger derivative in `ln alpha`, so more precision, and pulls the mean down (docs/maps.md,
+/// "Noisy photos"). The texels' own albedos are biased too, by their prior: the noise level
+/// of stage 2 is the texels' pooled misfit, and where texels astride edges hold most of it
+/// (10 times the noise on the untuned truth of docs/maps.md), the albedo's weak prior weighs
+/// against a dark texel's few photos. A rubber band (alpha 0.5, albedo 0.05) came out at
+/// 0.466-0.486 held at those albedos and at 0.456-0.478 re-fitted under that prior (16^2 to
+/// 128^2, 96^2 photos); re-fitted without a prior on a dielectric's albedo, at 0.499.
 #[allow(clippy::too_many_arguments)]
 fn pooled_centre(
     model: &TexelModel,
@@ -1302,6 +1360,7 @@ fn pooled_centre(
     centre: &mut [f64],
     sigma2: f64,
 ) {
+    use nalgebra::{DMatrix, DVector};
     let (s, dim) = (model.specular_dim(), model.dim());
     let members: Vec<usize> = (0..texels.len())
         .filter(|&t| assignment[t] == b && texels[t].kind == kind && !blocks.of(t).is_empty())
@@ -1309,39 +1368,96 @@ fn pooled_centre(
     if members.is_empty() {
         return;
     }
-    let flat = Prior {
-        kind,
-        centre: vec![0.0; dim],
-        precision: vec![0.0; dim],
+    // No prior on the shared coordinates, nor on a dielectric's albedo (1e-6, which keeps a
+    // saturated albedo's block invertible); a metal's albedo stays none and the slopes near
+    // the normal, as their kinds define them.
+    let mut prior = model.basis_prior(kind, kind, centre);
+    prior.precision[..s].fill(0.0);
+    if kind != Kind::Metal {
+        prior.precision[s..s + 3].fill(1e-6);
+    }
+    let own = dim - s;
+    // One texel's cost, the shared coordinates' reduced half gradient and half Gauss-Newton
+    // matrix, and the pieces that give its own step from the shared one.
+    struct Reduced {
+        cost: f64,
+        gradient: DVector<f64>,
+        matrix: DMatrix<f64>,
+        /// `M_nn^-1 g_n` and `M_nn^-1 M_ns`.
+        own_step: DVector<f64>,
+        own_coupling: DMatrix<f64>,
+    }
+    let reduce = |x: &[f64], t: usize| -> Option<Reduced> {
+        let (cost, g, m) = model.linearised_any(x, blocks.of(t), sigma2, &prior);
+        let m = DMatrix::from_row_slice(dim, dim, &m);
+        let g = DVector::from_vec(g);
+        let factor = m.view((s, s), (own, own)).into_owned().cholesky()?;
+        let own_step = factor.solve(&g.rows(s, own).into_owned());
+        let own_coupling = factor.solve(&m.view((s, 0), (own, s)).into_owned());
+        Some(Reduced {
+            cost,
+            gradient: g.rows(0, s) - m.view((0, s), (s, own)) * &own_step,
+            matrix: m.view((0, 0), (s, s)) - m.view((0, s), (s, own)) * &own_coupling,
+            own_step,
+            own_coupling,
+        })
     };
-    // The pooled data cost, half gradient and half Gauss-Newton matrix in the specular
-    // coordinates, summed over the members in order (the same for any thread count).
-    let pooled = |specular: &[f64]| {
-        let parts: Vec<(f64, Vec<f64>, Vec<f64>)> = members
+    // Every member at `shared` with its own coordinates `xs`, summed in order (the same for
+    // any thread count); `None` where a texel's own block is not positive definite.
+    let pooled = |members: &[usize],
+                  xs: &[Vec<f64>]|
+     -> Option<(f64, DVector<f64>, DMatrix<f64>, Vec<Reduced>)> {
+        let parts: Option<Vec<Reduced>> = members
             .par_iter()
+            .zip(xs)
+            .map(|(&t, x)| reduce(x, t))
+            .collect();
+        let parts = parts?;
+        let mut sums = (0.0, DVector::zeros(s), DMatrix::zeros(s, s));
+        for part in &parts {
+            sums.0 += part.cost;
+            sums.1 += &part.gradient;
+            sums.2 += &part.matrix;
+        }
+        Some((sums.0, sums.1, sums.2, parts))
+    };
+    let at_centre = |members: &[usize]| -> Vec<Vec<f64>> {
+        members
+            .iter()
             .map(|&t| {
                 let mut x = texels[t].x.clone();
-                x[..s].copy_from_slice(specular);
-                model.linearised_any(&x, blocks.of(t), sigma2, &flat)
+                x[..s].copy_from_slice(&centre[..s]);
+                x
             })
-            .collect();
-        let mut sums = (
-            0.0,
-            nalgebra::DVector::zeros(s),
-            nalgebra::DMatrix::zeros(s, s),
-        );
-        for (cost, gradient, matrix) in parts {
-            sums.0 += cost;
-            for i in 0..s {
-                sums.1[i] += gradient[i];
-                for j in 0..s {
-                    sums.2[(i, j)] += matrix[i * dim + j];
-                }
-            }
-        }
-        sums
+            .collect()
     };
-    let mut at = pooled(&centre[..s]);
+    let mut xs = at_centre(&members);
+    let Some(first) = pooled(&members, &xs) else {
+        return;
+    };
+    // Texels the basis cannot explain (astride an edge, holding another material too) are
+    // left out: their cost per residual at the start is over `OUTLIER_RATIO` times the
+    // members' median.
+    let per_residual: Vec<f64> = first
+        .3
+        .iter()
+        .zip(&members)
+        .map(|(part, &t)| part.cost / texels[t].residuals.max(1) as f64)
+        .collect();
+    let mut sorted = per_residual.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let inliers: Vec<usize> = members
+        .iter()
+        .zip(&per_residual)
+        .filter(|&(_, &c)| c <= OUTLIER_RATIO * median)
+        .map(|(&t, _)| t)
+        .collect();
+    let members = inliers;
+    xs = at_centre(&members);
+    let Some(mut at) = pooled(&members, &xs) else {
+        return;
+    };
     for _ in 0..POOLED_STEPS {
         let Some(factor) = at.2.clone().cholesky() else {
             return;
@@ -1349,15 +1465,30 @@ fn pooled_centre(
         let step = factor.solve(&at.1).map(|v: f64| v.clamp(-1.0, 1.0));
         let mut scale = 1.0;
         let accepted = (0..POOLED_HALVINGS).find_map(|_| {
-            let trial: Vec<f64> = (0..s).map(|i| centre[i] - scale * step[i]).collect();
-            let next = pooled(&trial);
+            let trial: Vec<Vec<f64>> = xs
+                .iter()
+                .zip(&at.3)
+                .map(|(x, part)| {
+                    let own_step = &part.own_step - &part.own_coupling * &step;
+                    let mut next = x.clone();
+                    for i in 0..s {
+                        next[i] -= scale * step[i];
+                    }
+                    for i in 0..own {
+                        next[s + i] -= scale * own_step[i].clamp(-1.0, 1.0);
+                    }
+                    next
+                })
+                .collect();
             scale *= 0.5;
+            let next = pooled(&members, &trial)?;
             (next.0 < at.0).then_some((trial, next))
         });
         let Some((trial, next)) = accepted else {
             return;
         };
-        centre[..s].copy_from_slice(&trial);
+        centre[..s].copy_from_slice(&trial[0][..s]);
+        xs = trial;
         at = next;
         if step.amax() < POOLED_TOLERANCE {
             return;
@@ -2196,6 +2327,41 @@ mod tests {
     /// [`three_materials_and_an_edge`] would take (a blend of the paint and the gold); of three
     /// dielectrics on one line in these coordinates (alpha 0.15, 0.3 and 0.6, F0 0.04), it keeps
     /// the middle one, whose texels sit at one place, and drops a basis of 0.2% of the texels.
+    /// One pixel per texel on a `width` x `height` grid, every texel seen.
+    fn one_pixel_texels(width: usize, height: usize) -> TexelBlocks {
+        TexelBlocks {
+            offsets: (0..=width * height).collect(),
+            pixels: (0..width * height).collect(),
+            grid: TexelGrid { width, height },
+            stride: 1,
+        }
+    }
+
+    #[test]
+    fn a_line_of_texels_astride_an_edge_covers_no_area_and_a_band_two_wide_does() {
+        let (w, h) = (8, 6);
+        let blocks = one_pixel_texels(w, h);
+        // Basis 0 everywhere but on basis 1's staircase (a slanted edge's mixed texels) and
+        // basis 2's band two texels wide.
+        let mut labels = vec![0; w * h];
+        for r in 0..h {
+            labels[r * w + r] = 1;
+            labels[r * w + r.saturating_sub(1)] = 1;
+            labels[r * w + 6] = 2;
+            labels[r * w + 7] = 2;
+        }
+        assert!(!covers_an_area(&labels, &blocks, 1));
+        assert!(covers_an_area(&labels, &blocks, 2));
+        assert!(covers_an_area(&labels, &blocks, 0));
+        // An unseen texel breaks a block: the band with one texel unseen in every other row.
+        let mut sparse = one_pixel_texels(w, h);
+        sparse.offsets = (0..=w * h)
+            .map(|t| t - (0..t).filter(|&u| u % w == 7 && (u / w) % 2 == 0).count())
+            .collect();
+        sparse.pixels.truncate(*sparse.offsets.last().unwrap());
+        assert!(!covers_an_area(&labels, &sparse, 2));
+    }
+
     #[test]
     fn kmeans_drops_blends_and_negligible_bases_but_keeps_a_material_between_two() {
         assert_bases(
