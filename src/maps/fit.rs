@@ -1153,8 +1153,9 @@ fn basis_fits(
     let seen: Vec<usize> = (0..texels.len())
         .filter(|&t| !blocks.of(t).is_empty())
         .collect();
-    let mut clusters = weighted_kmeans(&texels, &seen, specular, roughness, k);
-    let bic = clustering_bic(&texels, &seen, &clusters.centres, roughness);
+    let points = ClusteringPoints::new(&texels, specular, roughness);
+    let mut clusters = weighted_kmeans(&texels, &points, &seen, roughness, k);
+    let bic = clustering_bic(&points, &seen, &clusters.centres, roughness);
     for round in 0..ROUNDS {
         let prior_of =
             |kind: Kind, b: usize| model.basis_prior(kind, clusters.kinds[b], &clusters.centres[b]);
@@ -1597,18 +1598,21 @@ impl Clusters {
     /// once the bases have kinds, a basis's F0 is that of its texels of its own kind only (the
     /// first `roughness` coordinates come from all its texels).
     fn recentre(&mut self, texels: &[TexelFit], seen: &[usize], dim: usize, roughness: usize) {
-        self.recentre_over(texels, seen, dim, roughness, Weight::Data);
+        let data =
+            |t: usize, j: usize| clustering_coordinate(&texels[t], j, roughness, Weight::Data);
+        self.recentre_over(texels, seen, dim, roughness, &data);
     }
 
-    /// [`Clusters::recentre`] over the texels `members` only, each coordinate weighted by
-    /// `weight`.
+    /// [`Clusters::recentre`] over the texels `members` only, texel `t`'s coordinate `j` and
+    /// its weight given by `coordinate(t, j)` (Lloyd's iteration reads them from its
+    /// [`ClusteringPoints`]).
     fn recentre_over(
         &mut self,
         texels: &[TexelFit],
         members: &[usize],
         dim: usize,
         roughness: usize,
-        weight: Weight,
+        coordinate: &dyn Fn(usize, usize) -> (f64, f64),
     ) {
         let k = self.centres.len();
         let mut sums = vec![vec![0.0; dim]; k];
@@ -1617,7 +1621,7 @@ impl Clusters {
             let c = self.assignment[t];
             let own_kind = self.kinds.get(c).is_none_or(|&kind| kind == texels[t].kind);
             for j in 0..if own_kind { dim } else { roughness } {
-                let (value, w) = clustering_coordinate(&texels[t], j, roughness, weight);
+                let (value, w) = coordinate(t, j);
                 sums[c][j] += w * value;
                 weights[c][j] += w;
             }
@@ -1635,14 +1639,26 @@ impl Clusters {
     /// Lloyd's iteration on the truncated cost of [`weighted_kmeans`]: every texel goes to its
     /// nearest centre, and each centre becomes the mean of its texels within
     /// [`OUTLIER_COST`] of it, until no label changes.
-    fn lloyd(&mut self, texels: &[TexelFit], seen: &[usize], dim: usize, roughness: usize) {
+    fn lloyd(
+        &mut self,
+        texels: &[TexelFit],
+        points: &ClusteringPoints,
+        seen: &[usize],
+        roughness: usize,
+    ) {
+        let dim = points.dim;
         for _ in 0..LLOYD_ITERATIONS {
+            let centres: Vec<Vec<f64>> = self
+                .centres
+                .iter()
+                .map(|c| centre_values(c, roughness))
+                .collect();
             let nearest: Vec<(usize, f64)> = (0..texels.len())
                 .into_par_iter()
                 .map(|t| {
-                    self.centres
+                    centres
                         .iter()
-                        .map(|c| clustering_distance(&texels[t], c, roughness))
+                        .map(|c| points.distance(t, c))
                         .enumerate()
                         .min_by(|a, b| a.1.total_cmp(&b.1))
                         .expect("k >= 1")
@@ -1656,7 +1672,8 @@ impl Clusters {
                 .copied()
                 .filter(|&t| nearest[t].1 < OUTLIER_COST)
                 .collect();
-            self.recentre_over(texels, &inliers, dim, roughness, Weight::Marginal);
+            let marginal = |t: usize, j: usize| points.pairs[t * dim + j];
+            self.recentre_over(texels, &inliers, dim, roughness, &marginal);
             if !changed {
                 break;
             }
@@ -1684,18 +1701,18 @@ impl Clusters {
     fn drop_non_materials(
         &mut self,
         texels: &[TexelFit],
+        points: &ClusteringPoints,
         seen: &[usize],
-        dim: usize,
         roughness: usize,
     ) -> Vec<usize> {
         let mut dropped = Vec::new();
         while self.centres.len() > 1 {
             let k = self.centres.len();
-            let bic = clustering_bic(texels, seen, &self.centres, roughness);
+            let bic = clustering_bic(points, seen, &self.centres, roughness);
             let without = |c: usize| {
                 let mut centres = self.centres.clone();
                 centres.remove(c);
-                clustering_bic(texels, seen, &centres, roughness)
+                clustering_bic(points, seen, &centres, roughness)
             };
             let drop = (0..k)
                 .find(|&c| self.is_blend(texels, seen, c, roughness))
@@ -1709,7 +1726,7 @@ impl Clusters {
             let Some(c) = drop else { break };
             dropped.extend(seen.iter().filter(|&&t| self.assignment[t] == c));
             self.centres.remove(c);
-            self.lloyd(texels, seen, dim, roughness);
+            self.lloyd(texels, points, seen, roughness);
         }
         dropped
     }
@@ -1788,23 +1805,27 @@ const BLEND_SPREAD: f64 = 0.07;
 /// "Model-based clustering, discriminant analysis, and density estimation", JASA 97, section
 /// 4.1): `-2` times the classification log-likelihood of the mixture that [`weighted_kmeans`]'
 /// truncated cost approximates (each texel's squared distance from its nearest centre in the
-/// marginal precision of [`clustering_distance`], at most [`OUTLIER_COST`], and `-2 n_c ln
+/// marginal precision of [`ClusteringPoints::distance`], at most [`OUTLIER_COST`], and `-2 n_c ln
 /// (n_c / n)` for the mixing proportions) plus `(K dim + K - 1) ln n` for the centres and
 /// proportions. The variances are the texels' own (data and basis prior), not estimated, so
 /// they add no parameters. Lower is better.
 fn clustering_bic(
-    texels: &[TexelFit],
+    points: &ClusteringPoints,
     seen: &[usize],
     centres: &[Vec<f64>],
     roughness: usize,
 ) -> f64 {
     let k = centres.len();
+    let centres: Vec<Vec<f64>> = centres
+        .iter()
+        .map(|c| centre_values(c, roughness))
+        .collect();
     let mut counts = vec![0usize; k];
     let mut cost = 0.0;
     for &t in seen {
         let (c, d) = centres
             .iter()
-            .map(|centre| clustering_distance(&texels[t], centre, roughness))
+            .map(|centre| points.distance(t, centre))
             .enumerate()
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .expect("k >= 1");
@@ -1896,19 +1917,40 @@ fn clustering_coordinate(
     (value, w.max(1e-9))
 }
 
-/// The squared distance of `texel` from `centre` (roughness coordinates and `logit F0`, as the
-/// bases hold them) in the coordinates of [`clustering_coordinate`], each weighted by its
-/// marginal precision.
-fn clustering_distance(texel: &TexelFit, centre: &[f64], roughness: usize) -> f64 {
-    centre
-        .iter()
-        .enumerate()
-        .map(|(j, &c)| {
-            let (value, w) = clustering_coordinate(texel, j, roughness, Weight::Marginal);
-            let c = if j < roughness { c } else { sigmoid(c) };
-            w * (value - c).powi(2)
-        })
-        .sum()
+/// Every texel's first `dim` coordinates where the bases are clustered, each with its marginal
+/// precision ([`clustering_coordinate`] with [`Weight::Marginal`]), computed once for a
+/// k-means. Computed in every distance instead (an exponential per F0 coordinate of the texel
+/// and of the centre), they took 81% of a `single` maps fit of yellow_box at 256^2: global
+/// k-means measures every texel against 256 candidate centres for each basis it adds.
+struct ClusteringPoints {
+    dim: usize,
+    /// `(value, precision)` of texel `t`'s coordinate `j` at `t * dim + j`.
+    pairs: Vec<(f64, f64)>,
+}
+
+impl ClusteringPoints {
+    fn new(texels: &[TexelFit], dim: usize, roughness: usize) -> ClusteringPoints {
+        ClusteringPoints {
+            dim,
+            pairs: texels
+                .iter()
+                .flat_map(|texel| {
+                    (0..dim)
+                        .map(move |j| clustering_coordinate(texel, j, roughness, Weight::Marginal))
+                })
+                .collect(),
+        }
+    }
+
+    /// The squared distance of texel `t` from a centre given in the clustering coordinates
+    /// ([`centre_values`]), each coordinate weighted by the texel's marginal precision.
+    fn distance(&self, t: usize, centre: &[f64]) -> f64 {
+        self.pairs[t * self.dim..(t + 1) * self.dim]
+            .iter()
+            .zip(centre)
+            .map(|(&(value, w), &c)| w * (value - c).powi(2))
+            .sum()
+    }
 }
 
 /// Weighted k-means with outliers: centres of `dim` leading coordinates, each texel costing
@@ -1932,11 +1974,12 @@ fn clustering_distance(texel: &TexelFit, centre: &[f64], roughness: usize) -> f6
 /// `roughness` coordinates are the roughness ([`Clusters::recentre`]).
 fn weighted_kmeans(
     texels: &[TexelFit],
+    points: &ClusteringPoints,
     seen: &[usize],
-    dim: usize,
     roughness: usize,
     k: usize,
 ) -> Clusters {
+    let dim = points.dim;
     let mut clusters = Clusters {
         centres: Vec::new(),
         kinds: Vec::new(),
@@ -1948,14 +1991,16 @@ fn weighted_kmeans(
         .step_by(seen.len().div_ceil(CANDIDATES).max(1))
         .collect();
     while clusters.centres.len() < k {
-        let cost = |t: usize, centre: &[f64]| {
-            clustering_distance(&texels[t], centre, roughness).min(OUTLIER_COST)
-        };
+        let cost = |t: usize, centre: &[f64]| points.distance(t, centre).min(OUTLIER_COST);
+        let centres: Vec<Vec<f64>> = clusters
+            .centres
+            .iter()
+            .map(|c| centre_values(c, roughness))
+            .collect();
         let nearest: Vec<f64> = seen
             .par_iter()
             .map(|&t| {
-                clusters
-                    .centres
+                centres
                     .iter()
                     .map(|c| cost(t, c))
                     .fold(OUTLIER_COST, f64::min)
@@ -1964,10 +2009,10 @@ fn weighted_kmeans(
         let gains: Vec<f64> = candidates
             .par_iter()
             .map(|&n| {
-                let centre = &texels[n].x[..dim];
+                let centre = centre_values(&texels[n].x[..dim], roughness);
                 seen.iter()
                     .zip(&nearest)
-                    .map(|(&t, &d)| (d - cost(t, centre)).max(0.0))
+                    .map(|(&t, &d)| (d - cost(t, &centre)).max(0.0))
                     .sum()
             })
             .collect();
@@ -1977,11 +2022,11 @@ fn weighted_kmeans(
             None => break,
         };
         clusters.centres.push(texels[best].x[..dim].to_vec());
-        clusters.lloyd(texels, seen, dim, roughness);
+        clusters.lloyd(texels, points, seen, roughness);
         // The texels of a basis that is no material are no candidate for the next centre, so
         // the next goes to a material (at 16^2 the edge texels of the three-material truth
         // came before the ceramic).
-        let dropped = clusters.drop_non_materials(texels, seen, dim, roughness);
+        let dropped = clusters.drop_non_materials(texels, points, seen, roughness);
         candidates.retain(|t| !dropped.contains(t));
     }
     let assignment = &clusters.assignment;
@@ -2259,7 +2304,8 @@ mod tests {
     /// red F0, by alpha.
     fn kmeans_bases(texels: &[TexelFit], k: usize) -> Vec<(Kind, f64, f64)> {
         let seen: Vec<usize> = (0..texels.len()).collect();
-        let clusters = weighted_kmeans(texels, &seen, 4, 1, k);
+        let points = ClusteringPoints::new(texels, 4, 1);
+        let clusters = weighted_kmeans(texels, &points, &seen, 1, k);
         let mut found: Vec<(Kind, f64, f64)> = clusters
             .centres
             .iter()
