@@ -17,10 +17,21 @@ pub struct Progress {
 impl Progress {
     /// A progress display for `total` steps of work called `label`.
     pub fn new(label: &str, total: u64) -> Self {
+        Self::with_template(label, total, "{pos}/{len} {msg} ({elapsed})")
+    }
+
+    /// A progress display for `total` items (`unit`, e.g. texels) of work called `label`, with
+    /// their rate and the time left.
+    pub fn with_rate(label: &str, total: u64, unit: &str) -> Self {
+        let counts = format!("{{human_pos}}/{{human_len}} {unit} ({{per_sec}}, {{eta}} left)");
+        Self::with_template(label, total, &counts)
+    }
+
+    fn with_template(label: &str, total: u64, counts: &str) -> Self {
         let bar = std::io::stderr().is_terminal().then(|| {
             let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
             bar.set_style(
-                ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
+                ProgressStyle::with_template(&format!("{{prefix}} [{{bar:30}}] {counts}"))
                     .expect("valid template")
                     .progress_chars("=> "),
             );

@@ -10,7 +10,7 @@
 //! The fit jobs use the options of `fit` (the same flags, e.g. `--pixel-samples`,
 //! `--max-iters`), and `--seed` seeds everything.
 
-use super::fit_args::{FitOptionArgs, MapsArgs};
+use super::fit_args::{CoarseToFine, FitOptionArgs, MapsArgs};
 use super::inputs::print_warning;
 use super::output::StagedFolder;
 use crate::bench::cpu_time::process_seconds;
@@ -451,6 +451,7 @@ fn maps_set(path: &Path, args: &BenchArgs, m: &MapsSettings) -> Result<MapsSet> 
         normals: crate::maps::fit::Normals::Off,
         bases: m.max_bases,
         holdout_photo: Some(last),
+        coarse_to_fine: CoarseToFine::default(),
     };
     // Each maps fit takes the options of the first model with its own model.
     let options = args.fit.maps_options(m.models[0], &maps, !args.quiet);

@@ -15,7 +15,7 @@ use crate::fit::point::params::{FresnelFamily, ParamSpace};
 use crate::fit::point::StochasticFit;
 use crate::fit::{FitOptions, Optimizer};
 use crate::loss::LossKind;
-use crate::maps::fit::Normals;
+use crate::maps::fit::{Normals, COARSEST_SIDE};
 use crate::maps::pipeline::MapsOptions;
 use crate::maps::TexelGrid;
 use crate::material::FresnelSpec;
@@ -252,6 +252,43 @@ pub struct MapsArgs {
     /// its prediction in the fit file (`holdout`).
     #[arg(long, requires = "maps")]
     pub holdout_photo: Option<usize>,
+    /// Choose the bases on a grid of at most N x N texels and refine the texels from it to the
+    /// full grid, halving the resolution of grid and photos per level (`off`: choose them on
+    /// the full grid, several times slower on large grids; docs/maps.md).
+    #[arg(long, value_parser = parse_coarse_to_fine, default_value_t = CoarseToFine::default(),
+          requires = "maps")]
+    pub coarse_to_fine: CoarseToFine,
+}
+
+/// The largest texel grid side `--coarse-to-fine` chooses the bases on, or none.
+#[derive(Clone, Copy, Debug)]
+pub struct CoarseToFine(pub Option<usize>);
+
+impl Default for CoarseToFine {
+    fn default() -> Self {
+        CoarseToFine(Some(COARSEST_SIDE))
+    }
+}
+
+impl std::fmt::Display for CoarseToFine {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        match self.0 {
+            Some(side) => write!(f, "{side}"),
+            None => write!(f, "off"),
+        }
+    }
+}
+
+fn parse_coarse_to_fine(text: &str) -> std::result::Result<CoarseToFine, String> {
+    if text == "off" {
+        return Ok(CoarseToFine(None));
+    }
+    match text.parse::<usize>() {
+        Ok(side) if (8..=8192).contains(&side) => Ok(CoarseToFine(Some(side))),
+        _ => Err(format!(
+            "`{text}`: expected `off` or a grid side from 8 to 8192 texels"
+        )),
+    }
 }
 
 fn parse_texels(text: &str) -> std::result::Result<TexelGrid, String> {
@@ -370,6 +407,7 @@ impl FitOptionArgs {
             normals: maps.normals,
             bases: maps.bases,
             holdout_photo: maps.holdout_photo,
+            coarsest: maps.coarse_to_fine.0.map(|side| side * side),
         }
     }
 }

@@ -40,6 +40,8 @@ pub struct MapsOptions {
     pub bases: usize,
     /// The photo (0-based, capture order) left out of the fit, whose prediction is reported.
     pub holdout_photo: Option<usize>,
+    /// The most texels the bases are chosen on ([`MapsFitOptions::coarsest`]).
+    pub coarsest: Option<usize>,
 }
 
 impl MapsOptions {
@@ -189,6 +191,7 @@ impl MapsSet {
                 normals: options.normals,
                 max_bases: options.bases,
                 validation_photo,
+                coarsest: options.coarsest,
                 progress: uniform.progress,
             },
         )?;
