@@ -31,7 +31,7 @@ pub fn sample(
     single: &SingleBounce<f64>,
     wi: Vec3<f64>,
     u: [f64; 2],
-    eval: impl Fn(Vec3<f64>) -> [f64; 3],
+    eval: impl FnOnce(Vec3<f64>) -> [f64; 3],
 ) -> Option<BrdfSample> {
     if wi.z <= 0.0 {
         return None;

@@ -378,8 +378,7 @@ pub fn write_exr(path: &Path, rgb: &[[f32; 3]], width: usize, height: usize) -> 
     })
 }
 
-/// Writes a viewable 8-bit sRGB PNG of linear RGB, atomically: each value is multiplied by
-/// `exposure`, clamped to [0, 1] (NaN counts as 0) and sRGB-encoded.
+/// Writes a viewable 8-bit sRGB PNG of linear RGB ([`tonemap_srgb8`]), atomically.
 pub fn write_png_tonemapped(
     path: &Path,
     rgb: &[[f32; 3]],
@@ -399,8 +398,13 @@ pub fn write_png_tonemapped(
         u32::try_from(width).map_err(|_| too_large())?,
         u32::try_from(height).map_err(|_| too_large())?,
     );
-    let bytes: Vec<u8> = rgb
-        .iter()
+    write_png_rgb8(path, &tonemap_srgb8(rgb, exposure), png_width, png_height)
+}
+
+/// Linear RGB as displayable 8-bit sRGB bytes (interleaved RGB): each value is multiplied by
+/// `exposure`, clamped to [0, 1] (NaN counts as 0) and sRGB-encoded.
+pub fn tonemap_srgb8(rgb: &[[f32; 3]], exposure: f64) -> Vec<u8> {
+    rgb.iter()
         .flatten()
         .map(|&v| {
             let scaled = f64::from(v) * exposure;
@@ -411,8 +415,7 @@ pub fn write_png_tonemapped(
             };
             (linear_to_srgb(clamped) * 255.0).round() as u8
         })
-        .collect();
-    write_png_rgb8(path, &bytes, png_width, png_height)
+        .collect()
 }
 
 /// Writes 8-bit RGB bytes (row-major, row 0 at the top, already display-encoded) as a PNG,

@@ -42,11 +42,28 @@ impl Light {
     /// Light arriving at surface point `x` (on z = 0) when the camera centre is `camera`
     /// (the flash's position).
     pub fn incident(&self, camera: DVec3, x: DVec3) -> Incident {
+        self.incident_with_cosine(camera, x, |wi| wi.z)
+    }
+
+    /// Light arriving at any point `x` measured on a plane perpendicular to the light's
+    /// direction (`I / d^2` or `E`): the surface's cosine is left to the caller, whose surface
+    /// need not be the plane z = 0.
+    pub fn perpendicular(&self, camera: DVec3, x: DVec3) -> Incident {
+        self.incident_with_cosine(camera, x, |_| 1.0)
+    }
+
+    /// [`Light::incident`] with the surface's cosine `cosine(wi)` (clamped at 0).
+    fn incident_with_cosine(
+        &self,
+        camera: DVec3,
+        x: DVec3,
+        cosine: impl Fn(DVec3) -> f64,
+    ) -> Incident {
         let from_point = |position: DVec3, intensity: [f64; 3]| {
             let to_light = position - x;
             let distance_squared = to_light.length_squared();
             let wi = to_light / distance_squared.sqrt();
-            let factor = wi.z.max(0.0) / distance_squared;
+            let factor = cosine(wi).max(0.0) / distance_squared;
             Incident {
                 wi,
                 irradiance: intensity.map(|c| c * factor),
@@ -63,9 +80,10 @@ impl Light {
                 irradiance,
             } => {
                 let wi = direction.normalize();
+                let factor = cosine(wi).max(0.0);
                 Incident {
                     wi,
-                    irradiance: irradiance.map(|c| c * wi.z.max(0.0)),
+                    irradiance: irradiance.map(|c| c * factor),
                 }
             }
         }

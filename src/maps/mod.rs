@@ -20,13 +20,14 @@
 //! against `n` (the geometric cosine in the records' irradiance is replaced by it): Mitsuba 3's
 //! `normalmap` BSDF and glTF's `normalTexture` do the same.
 //!
-//! The files (JSON plus images) are read and written by [`files`]; [`render`] evaluates maps over
-//! shading records; [`fit`] fits maps to a photo set; [`pipeline`] runs that fit on a photo set
+//! The files (JSON plus images) are read and written by [`files`]; [`lobe`] is what one texel
+//! evaluates; [`render`] evaluates maps over shading records; [`fit`] fits maps to a photo set; [`pipeline`] runs that fit on a photo set
 //! as the commands do (records, held-out photo, exposure, prediction, the fit file's fields).
 
 pub mod compare;
 pub mod files;
 pub mod fit;
+pub mod lobe;
 pub mod pipeline;
 pub mod render;
 
@@ -165,6 +166,11 @@ impl<T: Real> ShadingFrame<T> {
     /// `w` (tangent space, `z` the geometric normal) in the frame: `(w.s, w.t, w.n)`.
     pub fn local(&self, w: Vec3<T>) -> Vec3<T> {
         Vec3::new(w.dot(self.s), w.dot(self.t), w.dot(self.n))
+    }
+
+    /// The inverse of [`ShadingFrame::local`]: `w.x s + w.y t + w.z n`.
+    pub fn tangent(&self, w: Vec3<T>) -> Vec3<T> {
+        self.s * w.x + self.t * w.y + self.n * w.z
     }
 }
 

@@ -3,22 +3,12 @@
 //! through the scalar `f64` reference kernel and the renderer's own pixel loop (so pixels are
 //! the same sub-sample means, with the same random streams, as [`crate::render::render_pixels`]).
 
-use super::{AnyMaterial, MaterialMaps, ShadingFrame};
-use crate::bsdf::Brdf;
+use super::lobe::TexelLobe;
+use super::{AnyMaterial, MaterialMaps};
 use crate::error::{Error, Result};
 use crate::render::{accumulate, render_pixels};
 use crate::scalar::{Rgb, Vec3};
 use crate::shading::ShadingRecords;
-use rayon::prelude::*;
-use std::f64::consts::FRAC_1_PI;
-
-/// What a texel evaluates: its specular model, diffuse albedo / pi and the frame of its
-/// shading normal.
-struct TexelLobe {
-    brdf: Box<dyn Brdf>,
-    lambert: [f64; 3],
-    frame: Option<ShadingFrame<f64>>,
-}
 
 /// Predicted radiance of `pixels` for `maps`. Needs records built from a capture (with texture
 /// coordinates).
@@ -34,34 +24,17 @@ pub fn render_maps(
             "a maps material renders only photo sets (records with texture coordinates)",
         ));
     }
-    let lobes: Vec<TexelLobe> = (0..maps.grid.len())
-        .into_par_iter()
-        .map(|t| {
-            let material = maps.texel(t);
-            TexelLobe {
-                brdf: material.brdf(),
-                lambert: material.diffuse.map(|d| d * FRAC_1_PI),
-                frame: maps.normal(t).map(|n| ShadingFrame::new(Vec3::from_f64(n))),
-            }
-        })
-        .collect();
+    let lobes = TexelLobe::all(maps);
     Ok(accumulate(records, pixels, [0.0; 3], seed, |_, s, rng| {
         let lobe = &lobes[maps.grid.texel(records.uv[s])];
         let (wi, wo) = (Vec3::from_f64(records.wi[s]), Vec3::from_f64(records.wo[s]));
-        let (wi_local, wo_local, cosine_ratio) = match &lobe.frame {
-            None => (wi, wo, 1.0),
-            Some(frame) => {
-                let (i, o) = (frame.local(wi), frame.local(wo));
-                if i.z <= 0.0 || o.z <= 0.0 {
-                    return Rgb([0.0; 3]);
-                }
-                (i, o, i.z / wi.z)
-            }
+        // The records' irradiance holds the geometric cosine wi.z: replaced by the shading
+        // frame's (a ratio of exactly 1 without a normal map).
+        let Some((i, o)) = lobe.local(wi, wo) else {
+            return Rgb([0.0; 3]);
         };
-        let f = lobe.brdf.eval(wi_local, wo_local, rng).total();
-        Rgb(std::array::from_fn(|c| {
-            (f[c] + lobe.lambert[c]) * cosine_ratio
-        }))
+        let cosine_ratio = i.z / wi.z;
+        Rgb(lobe.value(i, o, rng).map(|v| v * cosine_ratio))
     }))
 }
 
