@@ -8,6 +8,7 @@
 //! - [`bsdf`]: the BRDF trait and one file per model;
 //! - [`capture`], [`shading`]: photo sets and the per-pixel records computed from them;
 //! - [`export`]: a material for Mitsuba 3, glTF and MaterialX;
+//! - [`relight`]: previews of a material under new light (environment, turntable, its photos' lights);
 //! - [`stress`]: the numerical stress sweep of every model;
 //! - [`bench`]: run time beside error of every model, and of render and fit jobs.
 
@@ -26,6 +27,7 @@ pub mod material;
 pub mod microfacet;
 pub mod progress;
 pub mod random;
+pub mod relight;
 pub mod render;
 pub mod report;
 pub mod scalar;
