@@ -34,6 +34,8 @@ enum Command {
     Synth(commands::synth::SynthArgs),
     /// Re-render a photo set with a material or fit.
     Render(commands::synth::RenderArgs),
+    /// Previews of a fit or material on a sphere or the flat sample under new light.
+    Relight(commands::relight::RelightArgs),
     /// Write a printable tag board (PNG, SVG) and its board.toml for phone captures.
     Board(commands::capture::BoardArgs),
     /// Phone photos of a sample in a printed board -> a photo set (rectified or perspective).
@@ -62,6 +64,7 @@ fn main() -> ExitCode {
         Command::Lobe(args) => commands::lobe::run_lobe(args),
         Command::Synth(args) => commands::synth::run_synth(args),
         Command::Render(args) => commands::synth::run_render(args),
+        Command::Relight(args) => commands::relight::run_relight(args),
         Command::Board(args) => commands::capture::run_board(args),
         Command::Capture(args) => commands::capture::run_capture(args),
         Command::Fit(args) => commands::fit::run_fit(args),

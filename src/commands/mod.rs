@@ -15,6 +15,7 @@ pub mod inputs;
 pub mod lobe;
 pub mod output;
 pub mod records;
+pub mod relight;
 pub mod stress;
 pub mod synth;
 
