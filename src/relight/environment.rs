@@ -140,6 +140,9 @@ impl Environment {
             ));
         }
         let image = load_image(path, ColorEncoding::Linear)?;
+        if image.rgb.is_empty() {
+            return Err(Error::invalid(path, "resolution", "the map has no texels"));
+        }
         let mut radiance = Vec::with_capacity(image.rgb.len());
         for (t, value) in image.rgb.iter().enumerate() {
             let rgb = value.map(f64::from);
