@@ -175,6 +175,9 @@ pub struct MapsFitOptions {
     pub normals: Normals,
     /// Largest number of basis materials tried.
     pub max_bases: usize,
+    /// A photo the fit does not see (index into the records' photos): its pixels are in no
+    /// texel's block, as if its loss weights were 0, without a copy of the records.
+    pub held_out_photo: Option<usize>,
     /// The photo left out to choose the number of bases (index into the records' photos);
     /// `None` fits `max_bases` bases without a choice.
     pub validation_photo: Option<usize>,
@@ -288,14 +291,26 @@ struct TexelBlocks {
 
 impl TexelBlocks {
     /// The blocks of the texels on a grid of `stride` (1: every texel; 2: every other texel
-    /// of every other row, the texel sample the choice of `K` works on).
-    fn new(records: &ShadingRecords, grid: TexelGrid, stride: usize) -> TexelBlocks {
+    /// of every other row, the texel sample the choice of `K` works on), without the pixels of
+    /// the photos `unseen` (indices into the records' photos).
+    fn new(
+        records: &ShadingRecords,
+        grid: TexelGrid,
+        stride: usize,
+        unseen: &[usize],
+    ) -> TexelBlocks {
         let spp = records.samples_per_pixel;
         let mut counts = vec![0usize; grid.len() + 1];
         let texel_of = |p: usize| grid.texel(records.uv[p * spp + spp / 2]);
         let on_stride = |t: usize| (t % grid.width) % stride == 0 && (t / grid.width) % stride == 0;
+        let unseen: Vec<std::ops::Range<usize>> =
+            unseen.iter().map(|&i| records.photos[i].pixels()).collect();
         let used: Vec<usize> = (0..records.pixel_count())
-            .filter(|&p| records.weight[p] > 0.0 && on_stride(texel_of(p)))
+            .filter(|&p| {
+                records.weight[p] > 0.0
+                    && on_stride(texel_of(p))
+                    && !unseen.iter().any(|photo| photo.contains(&p))
+            })
             .collect();
         for &p in &used {
             counts[texel_of(p) + 1] += 1;
@@ -904,7 +919,7 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         records,
         lobe_directions: None,
     };
-    let blocks = TexelBlocks::new(records, options.grid, 1);
+    let blocks = TexelBlocks::new(records, options.grid, 1, options.held_out_photo.as_slice());
     let train_error = relative_error(
         &maps_prediction(&model, &level.texels, options.grid, &blocks.pixels),
         records,
@@ -1047,7 +1062,7 @@ fn fit_level(records: &ShadingRecords, options: &MapsFitOptions, space: ParamSpa
         basis_trials = trials;
     }
     let model = model_with(normals);
-    let blocks = TexelBlocks::new(records, options.grid, 1);
+    let blocks = TexelBlocks::new(records, options.grid, 1, options.held_out_photo.as_slice());
     let first = independent_texels(&model, &blocks);
     tick("texels alone");
     let mut fits = basis_fits(&model, &blocks, &first, bases);
@@ -1081,20 +1096,15 @@ fn validated_bases(
     tick: &mut impl FnMut(&str),
 ) -> Vec<BasisTrial> {
     let records = model.records;
-    let training = records.restricted_to_photos(|i| i != photo);
-    // The same sub-samples with other weights: the same prepared directions.
-    let held_out = TexelModel {
-        records: &training,
-        ..*model
-    };
-    let blocks = TexelBlocks::new(&training, options.grid, 2);
+    let unseen: Vec<usize> = options.held_out_photo.into_iter().chain([photo]).collect();
+    let blocks = TexelBlocks::new(records, options.grid, 2, &unseen);
     let validation = validation_pixels(records, options.grid, photo);
     let normals = if model.normals { ", normals" } else { "" };
-    let first = independent_texels(&held_out, &blocks);
+    let first = independent_texels(model, &blocks);
     tick(&format!("texels alone (choosing K{normals})"));
     (1..=options.max_bases)
         .map(|k| {
-            let fits = basis_fits(&held_out, &blocks, &first, k);
+            let fits = basis_fits(model, &blocks, &first, k);
             let floor = best_floor(model, &fits.texels, options.grid, &validation);
             let error = floor.error;
             tick(&format!("{k} bases{normals}: validation error {error:.4}"));
@@ -1114,7 +1124,7 @@ fn validated_bases(
 /// other row).
 fn validation_pixels(records: &ShadingRecords, grid: TexelGrid, photo: usize) -> Vec<usize> {
     let photo = records.photos[photo].pixels();
-    TexelBlocks::new(records, grid, 2)
+    TexelBlocks::new(records, grid, 2, &[])
         .pixels
         .into_iter()
         .filter(|p| photo.contains(p))

@@ -17,6 +17,7 @@ use crate::fit::{fit_model, FitOptions};
 use crate::loss::LossKind;
 use crate::shading::{PhotoSpan, ShadingRecords};
 use serde_json::json;
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 /// Sub-samples per pixel of a maps fit: one, at the pixel's centre, so that each pixel sees
@@ -70,13 +71,14 @@ pub struct MapsSet {
 }
 
 /// One model's maps fit of a [`MapsSet`].
-pub struct MapsRun {
+pub struct MapsRun<'a> {
     pub model: Model,
     pub fit: MapsFit,
     /// The exposure fitted with `--fit-exposure`.
     pub exposure: Option<f64>,
-    /// The set's records under that exposure.
-    pub records: ShadingRecords,
+    /// The set's records under that exposure (the set's own without one: at 1024^2 a copy of
+    /// the records is a gigabyte).
+    pub records: Cow<'a, ShadingRecords>,
     /// The maps' radiance at every pixel of every photo, the held-out one included.
     pub predicted: Vec<[f64; 3]>,
     pub holdout: Option<HeldOutPhoto>,
@@ -156,7 +158,7 @@ impl MapsSet {
     }
 
     /// Fits maps of `model` to the photos (all but the held-out one) and predicts every photo.
-    pub fn fit(&self, model: Model) -> Result<MapsRun> {
+    pub fn fit(&self, model: Model) -> Result<MapsRun<'_>> {
         let options = &self.options;
         let uniform = options.uniform(model);
         // A fitted exposure comes from the uniform fit of the same photos (with the known
@@ -171,16 +173,12 @@ impl MapsSet {
         } else {
             None
         };
-        let records = exposed_records(&self.records, exposure.unwrap_or(1.0)).into_owned();
+        let records = exposed_records(&self.records, exposure.unwrap_or(1.0));
         let photos = records.photos.len();
         let holdout = options.holdout_photo;
-        let training = match holdout {
-            Some(h) => records.restricted_to_photos(|i| i != h),
-            None => records.clone(),
-        };
         let validation_photo = (0..photos).rev().find(|&i| Some(i) != holdout);
         let fit = fit_maps(
-            &training,
+            &records,
             &MapsFitOptions {
                 model,
                 ndf: uniform.space.ndf,
@@ -190,6 +188,7 @@ impl MapsSet {
                 grid: self.grid,
                 normals: options.normals,
                 max_bases: options.bases,
+                held_out_photo: holdout,
                 validation_photo,
                 coarsest: options.coarsest,
                 progress: uniform.progress,

@@ -60,8 +60,10 @@ pub(super) fn refine(
         lobe_directions: directions.as_deref(),
     };
     let grid = options.grid;
-    let blocks = TexelBlocks::new(records, grid, 1);
-    let sigma2 = independent_texels(&model, &TexelBlocks::new(records, grid, NOISE_STRIDE)).sigma2;
+    let held_out = options.held_out_photo.as_slice();
+    let blocks = TexelBlocks::new(records, grid, 1, held_out);
+    let noise_sample = TexelBlocks::new(records, grid, NOISE_STRIDE, held_out);
+    let sigma2 = independent_texels(&model, &noise_sample).sigma2;
     let refined = |model: &TexelModel, blocks: &TexelBlocks, what: &str| {
         let (mut texels, labels) = refined_texels(
             model,
@@ -87,13 +89,9 @@ pub(super) fn refine(
     // into a rougher lobe, and the floor chosen there is too rough for the finer grid.
     let roughness_floor = match options.validation_photo {
         Some(photo) if !coarse.basis_trials.is_empty() => {
-            let training = records.restricted_to_photos(|i| i != photo);
-            let held_out = TexelModel {
-                records: &training,
-                ..model
-            };
-            let sample = TexelBlocks::new(&training, grid, 2);
-            let (texels, _) = refined(&held_out, &sample, "choosing the roughness floor");
+            let unseen: Vec<usize> = held_out.iter().copied().chain([photo]).collect();
+            let sample = TexelBlocks::new(records, grid, 2, &unseen);
+            let (texels, _) = refined(&model, &sample, "choosing the roughness floor");
             let validation = validation_pixels(records, grid, photo);
             best_floor(&model, &texels, grid, &validation).floor
         }
