@@ -991,6 +991,8 @@ fn fit_level(records: &ShadingRecords, options: &MapsFitOptions, space: ParamSpa
             &coarse_options,
             space,
         );
+        // The refinement reads only the coarse fit: the coarse photos go before it.
+        drop(coarse_records);
         return refine::refine(records, options, space, coarse, grid);
     }
     let candidates: &[bool] = match options.normals {
