@@ -830,6 +830,25 @@ impl TexelModel<'_> {
         }
     }
 
+    /// `texel` solved as `kind` under the basis `(kind, centre)`, from its own coordinates moved
+    /// to the basis's: `(posterior cost, solution)`, the cost twice the negative log posterior
+    /// with the prior's normaliser, and [`KIND_SWITCH`] where the kinds differ (stage 4's first
+    /// round, and each texel of a finer grid, [`refine`]).
+    fn solve_under_basis(
+        &self,
+        texel: &TexelFit,
+        kind: Kind,
+        (basis_kind, centre): (Kind, &[f64]),
+        pixels: &[usize],
+        sigma2: f64,
+    ) -> (f64, TexelFit) {
+        let prior = self.basis_prior(kind, basis_kind, centre);
+        let fit = self.solve_any(self.moved_to(texel, &prior), pixels, sigma2, &prior);
+        let switch = if kind == basis_kind { 0.0 } else { KIND_SWITCH };
+        let posterior = self.cost(&fit.x, pixels, sigma2, &prior) + prior.log_normaliser() + switch;
+        (posterior, fit)
+    }
+
     /// `texel`'s coordinates with its specular ones moved to `prior`'s centre and, for a metal,
     /// its diffuse albedo to none (for a metal texel becoming a dielectric, to the start's
     /// albedo): where a texel starts when it joins a basis.
@@ -1291,8 +1310,6 @@ fn basis_fits(
     let points = ClusteringPoints::new(&texels, specular, roughness);
     let mut clusters = weighted_kmeans(&texels, &points, &seen, roughness, k);
     let bic = clustering_bic(&points, &seen, &clusters.centres, roughness);
-    let prior_of =
-        |kind: Kind, b: usize| model.basis_prior(kind, clusters.kinds[b], &clusters.centres[b]);
     // Round 0: the texel solved under every basis and as either kind, each from its own
     // coordinates moved to the basis; the labels are then chosen together
     // (`label_smoothing`), each basis's candidate being the texel's better kind.
@@ -1306,18 +1323,8 @@ fn basis_fits(
                         .kinds()
                         .iter()
                         .map(|&kind| {
-                            let prior = prior_of(kind, b);
-                            let start = model.moved_to(&texels[t], &prior);
-                            let fit = model.solve_any(start, pixels, sigma2, &prior);
-                            let switch = if kind == clusters.kinds[b] {
-                                0.0
-                            } else {
-                                KIND_SWITCH
-                            };
-                            let posterior = model.cost(&fit.x, pixels, sigma2, &prior)
-                                + prior.log_normaliser()
-                                + switch;
-                            (posterior, fit)
+                            let basis = (clusters.kinds[b], clusters.centres[b].as_slice());
+                            model.solve_under_basis(&texels[t], kind, basis, pixels, sigma2)
                         })
                         .min_by(|a, b| a.0.total_cmp(&b.0))
                         .expect("at least one kind")

@@ -216,15 +216,9 @@ fn texel_options(
                 .min_by(|&m, &n| distance(m).total_cmp(&distance(n)))
                 .expect("a coarse texel of the basis");
             let start = &coarse.texels[from];
-            let prior = model.basis_prior(start.kind, coarse.kinds[b], &coarse.prior_centres[b]);
-            let fit = model.solve_any(model.moved_to(start, &prior), pixels, sigma2, &prior);
-            let switch = if start.kind == coarse.kinds[b] {
-                0.0
-            } else {
-                KIND_SWITCH
-            };
-            let posterior =
-                model.cost(&fit.x, pixels, sigma2, &prior) + prior.log_normaliser() + switch;
+            let basis = (coarse.kinds[b], coarse.prior_centres[b].as_slice());
+            let (posterior, fit) =
+                model.solve_under_basis(start, start.kind, basis, pixels, sigma2);
             (b, posterior, fit)
         })
         .collect()
