@@ -940,7 +940,7 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
     };
     let blocks = TexelBlocks::new(records, options.grid, 1, options.held_out_photo.as_slice());
     let train_error = relative_error(
-        &maps_prediction(&model, &level.texels, options.grid, &blocks.pixels),
+        &maps_prediction(&model, &level.texels, None, options.grid, &blocks.pixels),
         records,
         &blocks.pixels,
     );
@@ -1087,7 +1087,7 @@ fn fit_level(records: &ShadingRecords, options: &MapsFitOptions, space: ParamSpa
     let first = independent_texels(&model, &blocks);
     tick("texels alone");
     let mut fits = basis_fits(&model, &blocks, &first, bases);
-    fits.texels = with_roughness_floor(&fits.texels, model.roughness_dim(), roughness_floor);
+    fits.texels = with_roughness_floor(fits.texels, model.roughness_dim(), roughness_floor);
     fill_unseen(&mut fits.texels, &blocks);
     tick(&format!("{bases} bases"));
     progress.finish();
@@ -1169,8 +1169,7 @@ fn best_floor(
     validation: &[usize],
 ) -> FloorChoice {
     let error_at = |floor: Option<f64>| {
-        let texels = with_roughness_floor(texels, model.roughness_dim(), floor);
-        let predicted = maps_prediction(model, &texels, grid, validation);
+        let predicted = maps_prediction(model, texels, floor, grid, validation);
         texel_relative_error(&predicted, model.records, validation, grid)
     };
     let errors: Vec<(Option<f64>, f64)> = ROUGHNESS_FLOORS
@@ -1362,20 +1361,18 @@ fn basis_fits(
 fn settle(
     model: &TexelModel,
     blocks: &TexelBlocks,
-    texels: &mut Vec<TexelFit>,
+    texels: &mut [TexelFit],
     clusters: &mut Clusters,
     sigma2: f64,
 ) {
     let seen = blocks.seen();
     for _ in 1..ROUNDS {
-        *texels = (0..texels.len())
-            .into_par_iter()
-            .map(|t| {
-                let (kind, b) = (texels[t].kind, clusters.assignment[t]);
-                let prior = model.basis_prior(kind, clusters.kinds[b], &clusters.centres[b]);
-                model.solve_any(texels[t].x.clone(), blocks.of(t), sigma2, &prior)
-            })
-            .collect();
+        // In place: at 1024^2 a second vector of texels is a few hundred megabytes.
+        texels.par_iter_mut().enumerate().for_each(|(t, texel)| {
+            let b = clusters.assignment[t];
+            let prior = model.basis_prior(texel.kind, clusters.kinds[b], &clusters.centres[b]);
+            *texel = model.solve_any(texel.x.clone(), blocks.of(t), sigma2, &prior);
+        });
         let (specular, roughness) = (model.specular_dim(), model.roughness_dim());
         clusters.recentre(texels, &seen, specular, roughness);
     }
@@ -1577,24 +1574,42 @@ fn pooled_centre(
             own_coupling,
         })
     };
+    // What a texel's own step needs, `own (1 + s)` numbers a member: at 1024^2 a basis holds
+    // half a million texels, and their `Reduced` parts, kept whole, were most of the fit's
+    // peak memory.
+    let stride = own * (1 + s);
+    // The own step of member `i` from the shared step.
+    let own_step_of = |own_parts: &[f64], i: usize, step: &DVector<f64>| -> DVector<f64> {
+        let part = &own_parts[i * stride..(i + 1) * stride];
+        let own_step = nalgebra::DVectorView::from_slice(&part[..own], own);
+        let own_coupling = nalgebra::DMatrixView::from_slice(&part[own..], own, s);
+        own_step - own_coupling * step
+    };
     // Every member at `shared` with its own coordinates `xs`, summed in order (the same for
-    // any thread count); `None` where a texel's own block is not positive definite.
+    // any thread count), a block of members at a time: the costs, the sums and each member's
+    // own parts; `None` where a texel's own block is not positive definite.
+    const BLOCK: usize = 1 << 14;
     let pooled = |members: &[usize],
                   xs: &[Vec<f64>]|
-     -> Option<(f64, DVector<f64>, DMatrix<f64>, Vec<Reduced>)> {
-        let parts: Option<Vec<Reduced>> = members
-            .par_iter()
-            .zip(xs)
-            .map(|(&t, x)| reduce(x, t))
-            .collect();
-        let parts = parts?;
+     -> Option<(f64, DVector<f64>, DMatrix<f64>, Vec<f64>, Vec<f64>)> {
         let mut sums = (0.0, DVector::zeros(s), DMatrix::zeros(s, s));
-        for part in &parts {
-            sums.0 += part.cost;
-            sums.1 += &part.gradient;
-            sums.2 += &part.matrix;
+        let mut costs = Vec::with_capacity(members.len());
+        let mut own_parts = Vec::with_capacity(members.len() * stride);
+        for (members, xs) in members.chunks(BLOCK).zip(xs.chunks(BLOCK)) {
+            let parts: Option<Vec<Reduced>> = members
+                .par_iter()
+                .zip(xs)
+                .map(|(&t, x)| reduce(x, t))
+                .collect();
+            for part in &parts? {
+                sums.0 += part.cost;
+                sums.1 += &part.gradient;
+                sums.2 += &part.matrix;
+                costs.push(part.cost);
+                own_parts.extend(part.own_step.iter().chain(part.own_coupling.iter()));
+            }
         }
-        Some((sums.0, sums.1, sums.2, parts))
+        Some((sums.0, sums.1, sums.2, costs, own_parts))
     };
     let at_centre = |members: &[usize]| -> Vec<Vec<f64>> {
         members
@@ -1617,8 +1632,9 @@ fn pooled_centre(
         .3
         .iter()
         .zip(&members)
-        .map(|(part, &t)| part.cost / texels[t].residuals.max(1) as f64)
+        .map(|(cost, &t)| cost / texels[t].residuals.max(1) as f64)
         .collect();
+    drop(first);
     let mut sorted = per_residual.clone();
     sorted.sort_by(f64::total_cmp);
     let median = sorted[sorted.len() / 2];
@@ -1642,9 +1658,9 @@ fn pooled_centre(
         let accepted = (0..POOLED_HALVINGS).find_map(|_| {
             let trial: Vec<Vec<f64>> = xs
                 .iter()
-                .zip(&at.3)
-                .map(|(x, part)| {
-                    let own_step = &part.own_step - &part.own_coupling * &step;
+                .enumerate()
+                .map(|(i, x)| {
+                    let own_step = own_step_of(&at.4, i, &step);
                     let mut next = x.clone();
                     for i in 0..s {
                         next[i] -= scale * step[i];
@@ -2241,23 +2257,28 @@ fn weighted_kmeans(
     clusters
 }
 
-/// `texels` with no roughness below `floor` along any axis (the first `roughness` coordinates
-/// are `ln alpha`, or `ln alpha_x` and `ln alpha_y`); the other coordinates are kept as
-/// fitted.
+/// Lays a roughness floor on texel coordinates `x`: no roughness below `floor` along any axis
+/// (the first `roughness` coordinates are `ln alpha`, or `ln alpha_x` and `ln alpha_y`); the
+/// other coordinates are kept as fitted.
+fn lay_roughness_floor(x: &mut [f64], roughness: usize, floor: Option<f64>) {
+    if let Some(floor) = floor {
+        for x in &mut x[..roughness] {
+            *x = x.max(floor.ln());
+        }
+    }
+}
+
+/// [`lay_roughness_floor`] on every texel, in place (at 1024^2 a copy of the texels is a few
+/// hundred megabytes).
 fn with_roughness_floor(
-    texels: &[TexelFit],
+    mut texels: Vec<TexelFit>,
     roughness: usize,
     floor: Option<f64>,
 ) -> Vec<TexelFit> {
-    let mut floored = texels.to_vec();
-    if let Some(floor) = floor {
-        for texel in &mut floored {
-            for x in &mut texel.x[..roughness] {
-                *x = x.max(floor.ln());
-            }
-        }
+    for texel in &mut texels {
+        lay_roughness_floor(&mut texel.x, roughness, floor);
     }
-    floored
+    texels
 }
 
 /// Texels no pixel sees take the coordinates of the nearest seen texel in index order
@@ -2309,11 +2330,12 @@ fn to_maps(model: &TexelModel, options: &MapsFitOptions, texels: &[TexelFit]) ->
     }
 }
 
-/// Predictions of `pixels` (of any photo) with per-texel coordinates, each pixel by the texel
-/// its centre sees.
+/// Predictions of `pixels` (of any photo) with per-texel coordinates under `roughness_floor`
+/// ([`lay_roughness_floor`]), each pixel by the texel its centre sees.
 fn maps_prediction(
     model: &TexelModel,
     texels: &[TexelFit],
+    roughness_floor: Option<f64>,
     grid: TexelGrid,
     pixels: &[usize],
 ) -> Vec<[f64; 3]> {
@@ -2322,8 +2344,10 @@ fn maps_prediction(
         .par_iter()
         .map(|&p| {
             let t = grid.texel(model.records.uv[p * spp + spp / 2]);
+            let mut x = texels[t].x.clone();
+            lay_roughness_floor(&mut x, model.roughness_dim(), roughness_floor);
             model
-                .predict(&texels[t].x, &[p])
+                .predict(&x, &[p])
                 .next()
                 .expect("one pixel, one prediction")
         })

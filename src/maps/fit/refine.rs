@@ -99,7 +99,7 @@ pub(super) fn refine(
     };
     let (texels, clusters) = refined(&model, &blocks, "");
     let (bases, prior_centres) = reported_bases(&model, &blocks, &texels, &clusters, sigma2);
-    let mut texels = with_roughness_floor(&texels, model.roughness_dim(), roughness_floor);
+    let mut texels = with_roughness_floor(texels, model.roughness_dim(), roughness_floor);
     fill_unseen(&mut texels, &blocks);
     Level {
         texels,
@@ -134,42 +134,60 @@ fn refined_texels(
         grid.len() as u64,
         "texels",
     );
+    let options = |t: usize, only: Option<usize>| {
+        texel_options(model, blocks, coarse, coarse_grid, t, sigma2, only)
+    };
+    // Each texel keeps the costs of all its candidate bases but only the solution under the
+    // cheapest: at 1024^2 every candidate's solution is a few hundred megabytes more, and the
+    // labels differ from the cheapest basis only along a few edges.
+    let mut costs: Vec<Vec<(usize, f64)>> = Vec::with_capacity(grid.len());
+    let mut texels: Vec<(usize, TexelFit)> = Vec::with_capacity(grid.len());
     // Bands of rows, so that the bar moves while the texels are solved in parallel.
     let band = grid.width * (grid.height / 32).max(1);
-    let mut options: Vec<Vec<(usize, f64, TexelFit)>> = Vec::with_capacity(grid.len());
     for first in (0..grid.len()).step_by(band) {
         let last = (first + band).min(grid.len());
-        options.par_extend(
-            (first..last)
-                .into_par_iter()
-                .map(|t| texel_options(model, blocks, coarse, coarse_grid, t, sigma2)),
-        );
+        let (band_costs, band_texels): (Vec<_>, Vec<_>) = (first..last)
+            .into_par_iter()
+            .map(|t| {
+                let mut candidates = options(t, None);
+                let cheapest = (0..candidates.len())
+                    .min_by(|&i, &j| candidates[i].1.total_cmp(&candidates[j].1))
+                    .expect("a basis for every texel");
+                let costs = candidates.iter().map(|&(b, cost, _)| (b, cost)).collect();
+                let (basis, _, fit) = candidates.swap_remove(cheapest);
+                (costs, (basis, fit))
+            })
+            .unzip();
+        costs.extend(band_costs);
+        texels.extend(band_texels);
         if progress {
             bar.update(last as u64, String::new);
         }
     }
     bar.finish();
-    let costs: Vec<Vec<(usize, f64)>> = options
-        .iter()
-        .map(|o| o.iter().map(|&(b, cost, _)| (b, cost)).collect())
-        .collect();
     let labels = label_smoothing(&costs, blocks);
-    let texels = options
-        .into_iter()
+    drop(costs);
+    let texels = texels
+        .into_par_iter()
         .zip(&labels)
-        .map(|(o, &label)| {
-            o.into_iter()
-                .find(|&(b, ..)| b == label)
-                .expect("the label is a candidate")
-                .2
+        .enumerate()
+        .map(|(t, ((basis, fit), &label))| {
+            if basis == label {
+                fit
+            } else {
+                options(t, Some(label))
+                    .pop()
+                    .expect("the label is a candidate")
+                    .2
+            }
         })
         .collect();
     (texels, labels)
 }
 
-/// Texel `t` solved under each basis of the 3 x 3 coarse texels around the one it lies in,
-/// from the coordinates of the nearest of them with that basis: `(basis, posterior cost,
-/// solution)`, the cost as in stage 3 ([`basis_fits`]).
+/// Texel `t` solved under each basis of the 3 x 3 coarse texels around the one it lies in
+/// (or only under basis `only`, one of them), from the coordinates of the nearest of them with
+/// that basis: `(basis, posterior cost, solution)`, the cost as in stage 3 ([`basis_fits`]).
 fn texel_options(
     model: &TexelModel,
     blocks: &TexelBlocks,
@@ -177,6 +195,7 @@ fn texel_options(
     coarse_grid: TexelGrid,
     t: usize,
     sigma2: f64,
+    only: Option<usize>,
 ) -> Vec<(usize, f64, TexelFit)> {
     let grid = blocks.grid;
     // The texel's centre in coarse texel units.
@@ -208,6 +227,7 @@ fn texel_options(
     bases.dedup();
     bases
         .into_iter()
+        .filter(|&b| only.is_none_or(|only| only == b))
         .map(|b| {
             let from = around
                 .iter()
