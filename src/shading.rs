@@ -151,20 +151,17 @@ impl ShadingRecords {
     }
 
     /// `predicted` (one value per pixel) minus the photo at every loss pixel, 0 elsewhere:
-    /// what the residual images of a fit show.
-    pub fn residuals(&self, predicted: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    /// what the residual images of a fit show. In place: at 1024^2 the values of a photo set
+    /// are a few hundred megabytes.
+    pub fn residuals(&self, mut predicted: Vec<[f64; 3]>) -> Vec<[f64; 3]> {
+        for ((p, t), w) in predicted.iter_mut().zip(&self.target).zip(&self.weight) {
+            *p = if *w > 0.0 {
+                [0, 1, 2].map(|c| p[c] - t[c])
+            } else {
+                [0.0; 3]
+            };
+        }
         predicted
-            .iter()
-            .zip(&self.target)
-            .zip(&self.weight)
-            .map(|((p, t), w)| {
-                if *w > 0.0 {
-                    [0, 1, 2].map(|c| p[c] - t[c])
-                } else {
-                    [0.0; 3]
-                }
-            })
-            .collect()
     }
 
     /// Computes the records of `capture` with `pixel_samples` stratified sub-samples per pixel

@@ -117,7 +117,7 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         &options,
     )
     .with_region(region);
-    let residual = records.residuals(predicted);
+    let residual = records.residuals(predicted.clone());
     let exposure = display_exposure(&records.target);
     write_photo_images(&residual_folder.path(""), records, &residual, exposure, "")?;
     file.write(&output)?;

@@ -34,11 +34,11 @@ pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
         .options
         .maps_options(*model, &args.map_options, !args.quiet);
     let set = MapsSet::new(&args.capture, capture, options, &print_warning)?;
-    let run = set.fit(*model)?;
+    let mut run = set.fit(*model)?;
     if !args.quiet {
         summarise(&run.fit, run.holdout.as_ref());
     }
-    let residual = run.records.residuals(&run.predicted);
+    let residual = run.records.residuals(std::mem::take(&mut run.predicted));
     let display = display_exposure(&run.records.target);
     write_photo_images(
         &residual_folder.path(""),
