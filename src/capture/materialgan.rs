@@ -472,6 +472,14 @@ mod tests {
         assert!(c.photos.iter().all(|p| p.saturated_mask.is_none()));
         let m = import(dir.path(), Some("512")).unwrap_err().to_string();
         assert!(m.contains("has no subfolder `512`"), "{m}");
+        // Opening the image subfolder imports that size.
+        assert_eq!(Capture::open(&dir.path().join("8")).unwrap(), c);
+        let empty = tempfile::tempdir().unwrap();
+        let m = Capture::open(empty.path())
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        assert!(m.contains("one of its image subfolders"), "{m}");
     }
 
     #[test]

@@ -107,8 +107,9 @@ pub struct Capture {
 }
 
 impl Capture {
-    /// Opens a photo set. `path` is a manifest file, a folder holding [`MANIFEST_NAME`], or a
-    /// MaterialGAN flash-capture folder ([`materialgan::import`] with its default image size).
+    /// Opens a photo set. `path` is a manifest file, a folder holding [`MANIFEST_NAME`], a
+    /// MaterialGAN flash-capture folder ([`materialgan::import`] with its default image size,
+    /// the smallest), or one image subfolder of it (`yellow_box/1024`: that size).
     pub fn open(path: &Path) -> Result<Capture> {
         let metadata = fs::metadata(path).map_err(|e| Error::io(path, e))?;
         if metadata.is_file() {
@@ -116,19 +117,24 @@ impl Capture {
         }
         let manifest = path.join(MANIFEST_NAME);
         if manifest.is_file() {
-            manifest::read(&manifest)
-        } else if materialgan::is_materialgan_folder(path) {
-            materialgan::import(path, None)
-        } else {
-            Err(Error::invalid(
+            return manifest::read(&manifest);
+        }
+        if materialgan::is_materialgan_folder(path) {
+            return materialgan::import(path, None);
+        }
+        match (path.parent(), path.file_name()) {
+            (Some(parent), Some(images)) if materialgan::is_materialgan_folder(parent) => {
+                materialgan::import(parent, Some(&images.to_string_lossy()))
+            }
+            _ => Err(Error::invalid(
                 path,
                 "folder",
                 format!(
-                    "expected a {MANIFEST_NAME} manifest, or a MaterialGAN flash capture \
-                     ({}) with NN.png images",
+                    "expected a {MANIFEST_NAME} manifest, a MaterialGAN flash capture ({}) \
+                     with NN.png images, or one of its image subfolders",
                     materialgan::METADATA_FILES.join(", ")
                 ),
-            ))
+            )),
         }
     }
 
