@@ -8,6 +8,7 @@
 //! | jobs | wall and CPU time of a render of a photo set, and of a fit of each model to a photo set, with the fit's final loss and roughness error | [`jobs`] |
 //! | plot | error against time per estimate, log-log, one curve per model | [`plot`] |
 //! | CPU clocks | thread and process CPU time, so that a loaded machine can be told from a slow tool | [`cpu_time`] |
+//! | memory | peak resident memory of a job | [`memory`] |
 //!
 //! The criterion benchmarks in `benches/` time the kernels for regressions; this module puts
 //! the same models' cost beside their error.
@@ -16,4 +17,5 @@ pub mod cpu_time;
 pub mod estimators;
 pub mod jobs;
 pub mod kernel;
+pub mod memory;
 pub mod plot;

@@ -4,7 +4,7 @@
 //! | job | what is timed | skip |
 //! | --- | --- | --- |
 //! | `render` | [`render_all`] of the records of a capture template (built once, 1 sample per pixel, no targets) with the template's material under each model; after one untimed render, the median of repeated renders until [`RenderTiming::min_seconds`] have passed | `false`: every pixel, exactly; `true`: only the pixels that enter a loss (weight > 0), through the [`RenderPlan`] a fit would use (the skips `--no-skip` leaves on); `rel_error_vs_exact` is the RMS difference from the exact render relative to its RMS |
-//! | `maps-fit` | a maps fit ([`crate::maps::fit`]) of each model to a photo set at each texel grid, leaving the last photo out: wall and CPU seconds of the fit and the prediction of every photo, the held-out photo's relative error and the naive baseline (the mean of the other photos); `seconds_vs_single` against the `single` maps fit of the same set and grid | none (a maps fit evaluates each pixel at its centre, exactly) |
+//! | `maps-fit` | a maps fit ([`crate::maps::fit`]) of each model to a photo set at each texel grid, leaving the last photo out: wall and CPU seconds of the fit and the prediction of every photo, texels per second, peak resident memory, the held-out photo's relative error and the naive baseline (the mean of the other photos); `seconds_vs_single` against the `single` maps fit of the same set and grid | none (a maps fit evaluates each pixel at its centre, exactly) |
 //! | `fit` | [`fit_model`] of each model to a photo set (records built once, optionally halved in resolution `halvings` times); the final loss and `alpha_rel_error = (alpha - alpha_true) / alpha_true` against the set's `material.json` | `false`: `--no-skip all`; `true`: every skip of [`crate::render::plan`] that `--no-skip` leaves on (pixels of weight 0 are never rendered by a fit) |
 //!
 //! `skipped_pixels` says how many pixels of weight 0 were left out; `plan` what the render
@@ -74,6 +74,11 @@ pub struct JobRow {
     pub bases: Option<usize>,
     pub held_out_error: Option<f64>,
     pub held_out_baseline: Option<f64>,
+    /// Maps fits: texels of the grid per wall second, and the process's peak resident memory
+    /// during the job in MB (the photos' records, loaded before it, included;
+    /// [`super::memory`]).
+    pub texels_per_second: Option<f64>,
+    pub peak_memory_mb: Option<f64>,
 }
 
 impl JobRow {
@@ -110,16 +115,19 @@ impl JobRow {
             bases: None,
             held_out_error: None,
             held_out_baseline: None,
+            texels_per_second: None,
+            peak_memory_mb: None,
         }
     }
 
     /// The row of a maps fit of `model` to `records` on `grid` that took `seconds` wall and
-    /// `cpu_seconds` CPU, with its held-out photo's prediction.
+    /// `cpu_seconds` CPU and `peak_bytes` of memory at most, with its held-out photo's
+    /// prediction.
     pub fn maps_fit(
         model: Model,
         records: &ShadingRecords,
         (grid, bases): (TexelGrid, usize),
-        (seconds, cpu_seconds): (f64, f64),
+        (seconds, cpu_seconds, peak_bytes): (f64, f64, Option<u64>),
         held_out: Option<&HeldOutPhoto>,
     ) -> JobRow {
         let used = records.weight.iter().filter(|&&w| w > 0.0).count();
@@ -131,6 +139,8 @@ impl JobRow {
             bases: Some(bases),
             held_out_error: held_out.map(|h| h.relative_error),
             held_out_baseline: held_out.and_then(|h| h.mean_photo_error),
+            texels_per_second: Some(grid.len() as f64 / seconds),
+            peak_memory_mb: peak_bytes.map(|b| b as f64 / (1u64 << 20) as f64),
             ..JobRow::new(JobKind::MapsFit, model, false, records, used)
         }
     }

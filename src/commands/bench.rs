@@ -17,6 +17,7 @@ use crate::bench::cpu_time::process_seconds;
 use crate::bench::estimators::{self, EstimatorRow, EstimatorSettings, ALPHA_RANGE};
 use crate::bench::jobs::{self, JobRow, RenderTiming};
 use crate::bench::kernel::{self, KernelRow};
+use crate::bench::memory;
 use crate::bench::plot::error_against_time;
 use crate::bsdf::Model;
 use crate::capture::atomic_file::write_atomically;
@@ -391,13 +392,16 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
                             set.capture_path.display()
                         );
                     }
+                    let peak_measured = memory::reset_peak();
                     let (started, cpu) = (Instant::now(), process_seconds());
                     let run = set.fit(model)?;
+                    let seconds = started.elapsed().as_secs_f64();
+                    let peak = peak_measured.then(memory::peak_resident_bytes).flatten();
                     let mut row = JobRow::maps_fit(
                         model,
                         &set.records,
                         (set.grid, run.fit.bases.len()),
-                        (started.elapsed().as_secs_f64(), process_seconds() - cpu),
+                        (seconds, process_seconds() - cpu, peak),
                         run.holdout.as_ref(),
                     );
                     row.set = Some(set.capture_path.display().to_string());
@@ -666,12 +670,14 @@ fn tables(report: &BenchReport) -> String {
         .collect();
     if !maps.is_empty() {
         out += &format!(
-            "\n{:<8} {:<12} {:>11} {:>9} {:>9} {:>7} {:>5} {:>9} {:>9}  {}\n",
+            "\n{:<8} {:<12} {:>11} {:>9} {:>9} {:>9} {:>8} {:>7} {:>5} {:>9} {:>9}  {}\n",
             "job",
             "model",
             "texels",
             "seconds",
             "cpu s",
+            "texels/s",
+            "peak MB",
             "/single",
             "bases",
             "held-out",
@@ -681,12 +687,15 @@ fn tables(report: &BenchReport) -> String {
         for j in maps {
             let [w, h] = j.texels.unwrap_or_default();
             out += &format!(
-                "{:<8} {:<12} {:>11} {:>9.2} {:>9.2} {:>7} {:>5} {:>9} {:>9}  {}\n",
+                "{:<8} {:<12} {:>11} {:>9.2} {:>9.2} {:>9} {:>8} {:>7} {:>5} {:>9} {:>9}  {}\n",
                 "maps-fit",
                 j.model.name(),
                 format!("{w}x{h}"),
                 j.seconds,
                 j.cpu_seconds,
+                j.texels_per_second
+                    .map_or("-".into(), |r| format!("{r:.0}")),
+                j.peak_memory_mb.map_or("-".into(), |m| format!("{m:.0}")),
                 j.seconds_vs_single
                     .map_or("-".into(), |r| format!("{r:.2}x")),
                 j.bases.map_or("-".into(), |b| b.to_string()),
