@@ -21,6 +21,7 @@ pub mod commands;
 pub mod error;
 pub mod export;
 pub mod fit;
+pub mod lobe;
 pub mod loss;
 pub mod maps;
 pub mod material;

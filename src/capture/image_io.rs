@@ -401,6 +401,22 @@ pub fn write_png_tonemapped(
     write_png_rgb8(path, &tonemap_srgb8(rgb, exposure), png_width, png_height)
 }
 
+/// Exposure that maps the 99.5th percentile of all channel values to 1 (so highlights clip
+/// only slightly and the PNGs of one set share one exposure).
+pub fn display_exposure(values: &[[f64; 3]]) -> f64 {
+    let mut all: Vec<f64> = values
+        .iter()
+        .flat_map(|v| v.iter().copied())
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    if all.is_empty() {
+        return 1.0;
+    }
+    let k = ((all.len() as f64 * 0.995) as usize).min(all.len() - 1);
+    let (_, p, _) = all.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
+    1.0 / *p
+}
+
 /// Linear RGB as displayable 8-bit sRGB bytes (interleaved RGB): each value is multiplied by
 /// `exposure`, clamped to [0, 1] (NaN counts as 0) and sRGB-encoded.
 pub fn tonemap_srgb8(rgb: &[[f32; 3]], exposure: f64) -> Vec<u8> {

@@ -14,7 +14,7 @@
 
 use super::fit::fit_photo_set;
 use super::fit_args::{FitOptionArgs, MapsArgs, McmcArgs};
-use super::images::display_exposure;
+use crate::capture::image_io::display_exposure;
 use super::inputs::print_warning;
 use super::output::StagedFolder;
 use crate::bsdf::Model;

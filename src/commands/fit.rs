@@ -4,9 +4,10 @@
 //! shares [`fit_photo_set`] too.
 
 use super::fit_args::FitArgs;
-use super::images::{display_exposure, write_photo_images};
+use super::images::write_photo_images;
 use super::inputs::print_warning;
 use super::output::StagedFolder;
+use crate::capture::image_io::display_exposure;
 use crate::capture::Capture;
 use crate::error::Result;
 use crate::fit::fit_file::{FitFile, RegionReport};

@@ -4,9 +4,10 @@
 //! evaluated at their centre (one sub-sample), so each sees exactly one texel.
 
 use super::fit_args::FitArgs;
-use super::images::{display_exposure, write_photo_images};
+use super::images::write_photo_images;
 use super::inputs::print_warning;
 use super::output::StagedFolder;
+use crate::capture::image_io::display_exposure;
 use crate::error::{Error, Result};
 use crate::maps::fit::{HeldOutPhoto, MapsFit};
 use crate::maps::pipeline::MapsSet;

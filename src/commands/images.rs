@@ -5,22 +5,6 @@ use crate::error::Result;
 use crate::shading::ShadingRecords;
 use std::path::Path;
 
-/// Exposure that maps the 99.5th percentile of all channel values to 1 (so highlights clip
-/// only slightly and the PNGs of one set share one exposure).
-pub fn display_exposure(values: &[[f64; 3]]) -> f64 {
-    let mut all: Vec<f64> = values
-        .iter()
-        .flat_map(|v| v.iter().copied())
-        .filter(|v| v.is_finite() && *v > 0.0)
-        .collect();
-    if all.is_empty() {
-        return 1.0;
-    }
-    let k = ((all.len() as f64 * 0.995) as usize).min(all.len() - 1);
-    let (_, p, _) = all.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
-    1.0 / *p
-}
-
 /// Write `folder/<stem>.exr` and `folder/<stem>.png` for every photo of `records`, with pixel
 /// values `per_pixel` (one per pixel of the records). Returns the file stems written.
 pub fn write_photo_images(

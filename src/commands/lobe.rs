@@ -4,12 +4,10 @@
 
 use super::MaterialArgs;
 use crate::albedo::albedo_by_bounce;
-
 use crate::error::{Error, Result};
+use crate::lobe::{incidence, lobe_picture};
 use crate::material::Material;
-use crate::random::rng_stream;
 use crate::scalar::Vec3;
-use rayon::prelude::*;
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -68,8 +66,7 @@ pub fn run_lobe(args: &LobeArgs) -> Result<()> {
     if let Some(path) = &args.output {
         super::output::check_output_file(path, args.force)?;
     }
-    let t = args.theta_i.to_radians();
-    let wi = Vec3::new(t.sin(), 0.0, t.cos());
+    let wi = incidence(args.theta_i);
     if let Some(path) = &args.output {
         write_lobe_png(&material, wi, args, path)?;
     }
@@ -124,33 +121,9 @@ fn write_lobe_png(
     args: &LobeArgs,
     path: &std::path::Path,
 ) -> Result<()> {
-    let brdf = material.brdf();
     let n = args.size;
-    let per_pixel = if brdf.is_stochastic() {
-        args.pixel_samples.max(1)
-    } else {
-        1
-    };
-    let values: Vec<[f64; 3]> = (0..n * n)
-        .into_par_iter()
-        .map(|p| {
-            let (x, y) = ((p % n) as f64 + 0.5, (p / n) as f64 + 0.5);
-            let (dx, dy) = (2.0 * x / n as f64 - 1.0, 1.0 - 2.0 * y / n as f64);
-            let r2 = dx * dx + dy * dy;
-            if r2 >= 1.0 {
-                return [0.0; 3];
-            }
-            let wo = Vec3::new(dx, dy, (1.0 - r2).sqrt());
-            let mut rng = rng_stream(args.seed, p as u64);
-            let mut sum = [0.0; 3];
-            for _ in 0..per_pixel {
-                let f = brdf.eval(wi, wo, &mut rng).total();
-                (0..3).for_each(|c| sum[c] += f[c] * wo.z);
-            }
-            sum.map(|s| s / per_pixel as f64)
-        })
-        .collect();
-    let exposure = super::images::display_exposure(&values);
+    let values = lobe_picture(material, wi, n, args.pixel_samples, args.seed);
+    let exposure = crate::capture::image_io::display_exposure(&values);
     let rgb: Vec<[f32; 3]> = values.iter().map(|v| v.map(|c| c as f32)).collect();
     crate::capture::image_io::write_png_tonemapped(path, &rgb, n, n, exposure)
 }

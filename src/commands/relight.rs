@@ -1,6 +1,6 @@
 //! `bouncefit relight`: previews of a fit or material under new light (docs/relight.md).
 
-use super::images::display_exposure;
+use crate::capture::image_io::display_exposure;
 use super::inputs::{load_any_material, open_capture};
 use super::output::StagedFolder;
 use crate::error::{Error, Result};

@@ -1,9 +1,10 @@
 //! `bouncefit synth` (make a photo set from a material and a capture) and `bouncefit render`
 //! (re-render a photo set with a material or fit, a fit's `exposure` applied).
 
-use super::images::{display_exposure, write_photo_images};
+use super::images::write_photo_images;
 use super::inputs::{load_any_material, open_capture};
 use super::output::StagedFolder;
+use crate::capture::image_io::display_exposure;
 use crate::capture::image_io::ColorEncoding;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
