@@ -66,9 +66,30 @@ fn relight_writes_frames_and_a_preview_for_every_light() {
     relight(&fit, &sky, &[]);
     assert_eq!(
         folder_entries(&sky),
-        ["frame_000.exr", "frame_000.png", "preview.gif"]
+        [
+            "environment.exr",
+            "frame_000.exr",
+            "frame_000.png",
+            "preview.gif"
+        ]
     );
     check_exr(&sky.join("frame_000.exr"), [24, 24]);
+    // The light written beside the frames is the bundled sky in the lat-long convention: its
+    // brightest texel is the sun's, at elevation 35 and azimuth 30 degrees.
+    let env = load_image(&sky.join("environment.exr"), ColorEncoding::Linear).unwrap();
+    assert_eq!([env.width, env.height], [256, 128]);
+    let brightest = (0..env.rgb.len())
+        .max_by(|&a, &b| env.rgb[a][0].total_cmp(&env.rgb[b][0]))
+        .unwrap();
+    let (column, row) = (brightest % env.width, brightest / env.width);
+    let (azimuth, elevation) = (
+        (column as f64 + 0.5) * 360.0 / 256.0,
+        90.0 - (row as f64 + 0.5) * 180.0 / 128.0,
+    );
+    assert!(
+        (azimuth - 30.0).abs() < 3.0 && (elevation - 35.0).abs() < 3.0,
+        "sun texel at azimuth {azimuth}, elevation {elevation}"
+    );
     assert_eq!(gif_frames(&sky.join("preview.gif")), 1);
 
     let turntable = dir.path().join("turntable");

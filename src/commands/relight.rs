@@ -1,14 +1,14 @@
 //! `bouncefit relight`: previews of a fit or material under new light (docs/relight.md).
 
-use crate::capture::image_io::display_exposure;
 use super::inputs::{load_any_material, open_capture};
 use super::output::StagedFolder;
+use crate::capture::image_io::display_exposure;
 use crate::error::{Error, Result};
 use crate::maps::{AnyMaterial, MaterialMaps};
 use crate::relight::environment::Environment;
 use crate::relight::geometry::Geometry;
 use crate::relight::lights::{fit_capture, Lights};
-use crate::relight::output::{write_frames, PREVIEW};
+use crate::relight::output::{write_frames, ENVIRONMENT, PREVIEW};
 use crate::relight::shade::Sampling;
 use crate::relight::{render, Scene};
 use std::path::PathBuf;
@@ -123,6 +123,9 @@ pub fn run_relight(args: &RelightArgs) -> Result<()> {
         display_exposure(&all)
     });
     write_frames(folder.staging(), &frames, exposure)?;
+    if let Lights::Environment { env, .. } = &lights {
+        env.write(&folder.staging().join(ENVIRONMENT))?;
+    }
     folder.commit()?;
     eprintln!(
         "relit {} frame(s) of {}x{} to {} ({PREVIEW})",

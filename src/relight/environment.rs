@@ -18,7 +18,7 @@
 //! direction that carries light has a positive density.
 
 use super::distribution::Distribution2D;
-use crate::capture::image_io::{load_image, ColorEncoding};
+use crate::capture::image_io::{load_image, write_exr, ColorEncoding};
 use crate::error::{Error, Result};
 use crate::maps::TexelGrid;
 use crate::scalar::Vec3;
@@ -156,6 +156,13 @@ impl Environment {
             radiance.push(rgb);
         }
         Ok(Environment::new(image.width, image.height, radiance))
+    }
+
+    /// Writes the map as a lat-long EXR in the convention [`Environment::load`] reads (linear
+    /// f32 RGB, row 0 at the zenith), so that another renderer can be lit by the same light.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let rgb: Vec<[f32; 3]> = self.radiance.iter().map(|v| v.map(|c| c as f32)).collect();
+        write_exr(path, &rgb, self.grid.width, self.grid.height)
     }
 
     /// Radiance arriving from the unit direction `w`.

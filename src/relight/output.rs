@@ -1,5 +1,6 @@
 //! A relit sequence on disk: per frame `<name>.exr` (linear radiance) and `<name>.png`
-//! (exposure-scaled, sRGB-encoded), and `preview.gif`, every frame of the sequence looping.
+//! (exposure-scaled, sRGB-encoded), and `preview.gif`, every frame of the sequence looping;
+//! under an environment also [`ENVIRONMENT`], the map as lit frame 0, for other renderers.
 //! Every file is written atomically ([`write_atomically`]).
 
 use super::Frame;
@@ -10,6 +11,9 @@ use std::path::Path;
 
 /// The animated preview's file name.
 pub const PREVIEW: &str = "preview.gif";
+
+/// The environment map of frame 0 ([`super::environment::Environment::write`]).
+pub const ENVIRONMENT: &str = "environment.exr";
 
 /// Time each frame of the preview is shown.
 const FRAME_MILLISECONDS: u32 = 80;
