@@ -31,8 +31,10 @@
 use super::maps::{MapsConversion, PbrTextures};
 use super::roughness::{anisotropy, gltf_roughness};
 use super::{Base, Conversion};
-use crate::material::FresnelSpec;
-use crate::microfacet::Height;
+use crate::bsdf::Model;
+use crate::maps::MaterialMaps;
+use crate::material::{FresnelSpec, Material};
+use crate::microfacet::{Height, NdfKind};
 use base64::{engine::general_purpose::STANDARD as BASE64, Engine};
 use serde_json::{json, Map, Value};
 use std::path::Path;
@@ -157,6 +159,67 @@ fn finish(mut material: Value, extensions: Map<String, Value>, more: Value) -> S
     let mut text = serde_json::to_string_pretty(&document).expect("a JSON value prints");
     text.push('\n');
     text
+}
+
+/// `[alpha_x, alpha_y]` of the glTF lobe written for the fitted `alpha` (module table): the
+/// smaller alpha is `roughnessFactor^2`, and `KHR_materials_anisotropy` stretches it to
+/// `mix(roughnessFactor^2, 1, anisotropyStrength^2)` along its direction; both capped at 1.
+fn described_alpha(alpha: [f64; 2]) -> [f64; 2] {
+    let (roughness, strength, along_y) = anisotropy(alpha);
+    let low = roughness * roughness;
+    let high = low + (1.0 - low) * strength * strength;
+    if along_y {
+        [low, high]
+    } else {
+        [high, low]
+    }
+}
+
+/// The material the glTF document of `conversion` describes, as a bouncefit material that the
+/// renderers here evaluate, so that what the export loses can be seen (`compare`'s report):
+/// glTF's lobe is single-bounce, height-correlated GGX (glTF 2.0 appendix B.3.2) with
+/// Schlick's Fresnel (B.3.4), whose F0 is the fitted one for both bases (a metal's
+/// `baseColorFactor`; a dielectric's `KHR_materials_ior` reflectance times its
+/// `KHR_materials_specular` colour), alpha as [`described_alpha`], and a metal's diffuse albedo
+/// is dropped. One difference stays: glTF weights a dielectric's diffuse by `1 - F` (B.3.5,
+/// `fresnel_mix`) where this keeps the fit's sum, brighter by at most `F` of the diffuse (about
+/// 4% seen head-on).
+pub fn described(conversion: &Conversion) -> Material {
+    described_texel(
+        &conversion.material,
+        conversion.f0,
+        conversion.base == Base::Metal,
+    )
+}
+
+/// [`described`] of a material of reflectance `f0` at normal incidence on a `metal` base.
+fn described_texel(material: &Material, f0: [f64; 3], metal: bool) -> Material {
+    Material {
+        model: Model::Single,
+        ndf: NdfKind::Ggx,
+        height: Height::Correlated,
+        alpha: described_alpha(material.alpha),
+        fresnel: FresnelSpec::Schlick { f0 },
+        diffuse: if metal { [0.0; 3] } else { material.diffuse },
+    }
+}
+
+/// The maps material the glTF document of a maps fit describes: [`described`] per texel, the
+/// normal map as it is.
+pub fn described_maps(conversion: &MapsConversion) -> MaterialMaps {
+    let texels: Vec<Material> = conversion
+        .texels
+        .iter()
+        .map(|t| described_texel(&t.material, t.f0, t.metal))
+        .collect();
+    MaterialMaps {
+        base: texels[0].clone(),
+        grid: conversion.maps.grid,
+        diffuse: Some(texels.iter().map(|t| t.diffuse).collect()),
+        specular: Some(conversion.texels.iter().map(|t| t.f0).collect()),
+        roughness: Some(texels.iter().map(|t| t.alpha).collect()),
+        normal: conversion.maps.normal.clone(),
+    }
 }
 
 /// glTF sampler constants (glTF 2.0 section 5.26, "sampler"): NEAREST and CLAMP_TO_EDGE.
@@ -309,4 +372,48 @@ fn quad(sample: [f64; 2]) -> Value {
             "uri": format!("data:application/octet-stream;base64,{}", BASE64.encode(&bytes)),
         }],
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn conversion(alpha: [f64; 2], fresnel: FresnelSpec, diffuse: [f64; 3]) -> Conversion {
+        Conversion::new(&Material {
+            model: Model::KullaConty,
+            ndf: NdfKind::Beckmann,
+            height: Height::Uncorrelated,
+            alpha,
+            fresnel,
+            diffuse,
+        })
+    }
+
+    /// What glTF describes: single-bounce correlated GGX, the fitted F0 as Schlick's, the
+    /// alphas that roughnessFactor and KHR_materials_anisotropy give back (capped at 1), and
+    /// a metal's diffuse dropped while a dielectric keeps it.
+    #[test]
+    fn described_material_is_what_the_document_carries() {
+        let copper = FresnelSpec::Conductor {
+            eta: [0.27, 0.68, 1.3],
+            k: [3.6, 2.6, 2.3],
+        };
+        let metal = described(&conversion([0.3, 0.3], copper, [0.2; 3]));
+        assert_eq!(
+            (metal.model, metal.ndf, metal.height),
+            (Model::Single, NdfKind::Ggx, Height::Correlated)
+        );
+        assert_eq!(metal.fresnel, FresnelSpec::Schlick { f0: copper.f0() });
+        assert_eq!(metal.diffuse, [0.0; 3]);
+        let close = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() + (a[1] - b[1]).abs() < 1e-12;
+        assert!(close(metal.alpha, [0.3, 0.3]), "{:?}", metal.alpha);
+        let stretched = described(&conversion([0.2, 0.6], copper, [0.0; 3]));
+        assert!(close(stretched.alpha, [0.2, 0.6]), "{:?}", stretched.alpha);
+        let capped = described(&conversion([1.5, 0.5], copper, [0.0; 3]));
+        assert!(close(capped.alpha, [1.0, 0.5]), "{:?}", capped.alpha);
+        let plastic = FresnelSpec::Schlick { f0: [0.04; 3] };
+        let dielectric = described(&conversion([0.3, 0.3], plastic, [0.6, 0.2, 0.1]));
+        assert_eq!(dielectric.diffuse, [0.6, 0.2, 0.1]);
+        assert_eq!(dielectric.fresnel, plastic);
+    }
 }
