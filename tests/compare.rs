@@ -116,10 +116,35 @@ fn multi_bounce_photos_rank_single_below_kulla_conty_in_every_output() {
             }
         }
     }
+    // Under new light: per model the relit sphere and sample, its glTF export's sphere and
+    // their difference, and its lobe. What glTF describes of `single` is `single` itself, so
+    // the two renders (same random streams) agree; kulla-conty's export loses the multiple
+    // bounces of alpha 0.5 copper and is darker.
+    let relit = &report["relit"];
+    let relit_row = |model: &str| {
+        let row = relit["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["model"] == model)
+            .unwrap();
+        for image in ["sphere", "sample", "gltf_sphere", "gltf_difference", "lobe"] {
+            let path = out.join(row[image].as_str().unwrap());
+            assert_eq!(png_size(&path), (128, 128), "{image}");
+        }
+        number(row, "gltf_mean_difference")
+    };
+    let (single_loss, kulla_loss) = (relit_row("single"), relit_row("kulla-conty"));
+    eprintln!(
+        "glTF export minus fit, relit: single {single_loss:+.4}, kulla-conty {kulla_loss:+.4}"
+    );
+    assert!(single_loss.abs() < 1e-3, "{single_loss}");
+    assert!(kulla_loss < -0.02, "{kulla_loss}");
     // The HTML embeds every image and the plot, and loads nothing from elsewhere.
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     let embedded = html.matches("src=\"data:image/png;base64,").count();
-    assert_eq!(embedded, 1 + photos.len() * (1 + 2 * 2));
+    let relit_images = 2 * 5 + 1;
+    assert_eq!(embedded, 1 + relit_images + photos.len() * (1 + 2 * 2));
     assert_eq!(html.matches("src=\"").count(), embedded);
     for external in ["http:", "https:", "<link", "<script", "url("] {
         assert!(!html.contains(external), "HTML contains {external}");
@@ -212,8 +237,8 @@ fn mcmc_adds_model_probabilities_intervals_and_the_posterior_plot() {
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert_eq!(
         html.matches("src=\"data:image/png;base64,").count(),
-        2 + 9 * (1 + 2 * 2),
-        "loss curves, posterior plot and the photo images are embedded"
+        2 + 2 * 5 + 1 + 9 * (1 + 2 * 2),
+        "loss curves, posterior plot, relit and photo images are embedded"
     );
     // Every model's fit file carries the shared posterior; the checkpoint is gone.
     let fit = read_json(&out.join("single").join("fit.json"));

@@ -1026,11 +1026,6 @@ fn maps_fits_refuse_stochastic_models_options_they_would_ignore_and_a_missing_ho
     assert!(!fit.exists() && !out.path().join("f.maps").exists());
 }
 
-/// The PNG's width and height.
-fn png_size(path: &Path) -> (u32, u32) {
-    image::image_dimensions(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
-
 /// `compare --maps` (issue #17 item 3) on the synthetic truth at 32 x 32 with the side-lit
 /// photo 9 held out: every field of the report, images of the right sizes, and the physics of
 /// the difference. Measured (32^2 and 64^2 texels): on the rough copper single's roughness is
@@ -1094,18 +1089,24 @@ fn compare_maps_reports_each_model_and_what_multiple_bounces_change() {
     assert!(kulla < single, "kulla-conty {kulla} vs single {single}");
     assert!(kulla < baseline);
 
-    // The maps side by side: two rows (models) of three cells (no normals), 2 pixels apart.
+    // The maps side by side: two rows (models) of three cells (no normals), 4 pixels apart,
+    // each texel an 8 x 8 square (32 texels make 256 pixels), roughness on a colour map whose
+    // bar is beside it.
     let maps = &report["maps_image"];
     assert_eq!(maps["rows"], serde_json::json!(["single", "kulla-conty"]));
     assert_eq!(
         maps["columns"],
         serde_json::json!(["diffuse", "specular", "roughness"])
     );
-    let cells = side as u32;
+    assert_eq!(maps["texel_pixels"], 8);
+    let cells = 8 * side as u32;
     assert_eq!(
         png_size(&out.join("maps.png")),
-        (3 * cells + 2 * 2, 2 * cells + 2)
+        (3 * cells + 2 * 4, 2 * cells + 4)
     );
+    assert!(out
+        .join(maps["roughness_colour_bar"].as_str().unwrap())
+        .is_file());
 
     // kulla-conty minus single.
     let differences = report["differences"].as_array().unwrap();
@@ -1128,6 +1129,9 @@ fn compare_maps_reports_each_model_and_what_multiple_bounces_change() {
         let image = out.join(d["images"][what].as_str().unwrap());
         assert_eq!(png_size(&image), (cells, cells));
         assert!(d["images"][format!("{what}_scale")].as_f64().unwrap() > 0.0);
+        assert!(out
+            .join(d["images"][format!("{what}_colour_bar")].as_str().unwrap())
+            .is_file());
     }
     let region = |kind: &str| {
         d["regions"]
@@ -1165,10 +1169,33 @@ fn compare_maps_reports_each_model_and_what_multiple_bounces_change() {
     let verdicts = report["verdicts"].to_string();
     assert!(verdicts.contains("kulla-conty predicts best"), "{verdicts}");
     assert!(verdicts.contains("kulla-conty minus single"), "{verdicts}");
+    // Under new light: the glTF export of single's maps is single's maps, up to roughness
+    // capped at 1 and diffuse albedo dropped under metal texels; kulla-conty's export loses the
+    // rough copper's multiple bounces and is darker.
+    let relit = |model: &str| {
+        let row = report["relit"]["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["model"] == model)
+            .unwrap();
+        for image in ["sphere", "sample", "gltf_sphere", "gltf_difference"] {
+            assert!(out.join(row[image].as_str().unwrap()).is_file(), "{image}");
+        }
+        assert!(row["lobe"].is_null());
+        row["gltf_mean_difference"].as_f64().unwrap()
+    };
+    let (single_loss, kulla_loss) = (relit("single"), relit("kulla-conty"));
+    eprintln!(
+        "glTF export minus fit, relit: single {single_loss:+.4}, kulla-conty {kulla_loss:+.4}"
+    );
+    assert!(kulla_loss < -0.01 && kulla_loss < 3.0 * single_loss.min(0.0) - 0.005);
+    // The figures: maps, roughness bar, two difference images with their bars; the relit
+    // images (four per model) and their bar; every photo's images.
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert_eq!(
         html.matches("src=\"data:image/png;base64,").count(),
-        3 + photos.len() * (1 + 2 * 2)
+        6 + (2 * 4 + 1) + photos.len() * (1 + 2 * 2)
     );
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(

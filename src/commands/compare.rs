@@ -14,23 +14,28 @@
 
 use super::fit::fit_photo_set;
 use super::fit_args::{FitOptionArgs, MapsArgs, McmcArgs};
-use crate::capture::image_io::display_exposure;
 use super::inputs::print_warning;
 use super::output::StagedFolder;
 use crate::bsdf::Model;
 use crate::capture::atomic_file::write_atomically;
+use crate::capture::image_io::display_exposure;
 use crate::error::{Error, Result};
+use crate::export::gltf::{described, described_maps};
+use crate::export::maps::MapsConversion;
+use crate::export::Conversion;
 use crate::fit::bayes::holdout::{check_fold_count, cross_validate};
 use crate::fit::bayes::selection::{HeldOutErrors, HeldOutRanking};
 use crate::fit::fit_file::{FitFile, RegionReport};
 use crate::maps::compare::MapsDifference;
 use crate::maps::fit::check_model;
 use crate::maps::pipeline::{MapsRun, MapsSet};
+use crate::maps::MaterialMaps;
 use crate::render::render_all;
 use crate::report::images::{residual_scale, write_model_images};
 use crate::report::maps::{
     write_difference_images, write_maps_image, DifferenceRow, MapsModelRow, MapsReport,
 };
+use crate::report::relit::{write_relit, RelitInput};
 use crate::report::{html, markdown, plots, HeldOut, ModelRow, Page, Report};
 use serde::Serialize;
 use std::io::Write;
@@ -178,7 +183,17 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
             .iter()
             .map(move |w| format!("{model}: warning: {w}"))
     }));
+    let relit_inputs: Vec<RelitInput> = fits
+        .iter()
+        .map(|fit| RelitInput {
+            model: fit.material.model,
+            fitted: MaterialMaps::uniform(&fit.material),
+            gltf: MaterialMaps::uniform(&described(&Conversion::new(&fit.material))),
+            lobe: Some(fit.material.clone()),
+        })
+        .collect();
     let report = Report {
+        relit: write_relit(&root, &relit_inputs)?,
         capture: args.capture.display().to_string(),
         capture_name: capture.name.clone(),
         photos: records.photos.iter().map(|p| p.stem.clone()).collect(),
@@ -297,7 +312,17 @@ fn run_maps_compare(args: &CompareArgs) -> Result<()> {
             differences.push(DifferenceRow { difference, images });
         }
     }
+    let relit_inputs: Vec<RelitInput> = runs
+        .iter()
+        .map(|run| RelitInput {
+            model: run.model,
+            fitted: run.fit.maps.clone(),
+            gltf: described_maps(&MapsConversion::new(&run.fit.maps)),
+            lobe: None,
+        })
+        .collect();
     let report = MapsReport {
+        relit: write_relit(&root, &relit_inputs)?,
         kind: "maps",
         capture: args.capture.display().to_string(),
         capture_name: set.capture.name.clone(),

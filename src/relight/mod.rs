@@ -87,6 +87,16 @@ pub fn render(scene: &Scene, frames: &[(String, Lighting)]) -> Vec<Frame> {
     rendered
 }
 
+/// One frame of `scene` under `env` as it is (not turned), sampled by MIS.
+pub fn render_under(scene: &Scene, env: &environment::Environment) -> Frame {
+    let lighting = Lighting::Environment {
+        env,
+        turn: shade::Turn::by(0.0),
+        sampling: shade::Sampling::Mis,
+    };
+    render(scene, &[(String::new(), lighting)]).remove(0)
+}
+
 /// The mean of the samples of the pixel at `[column, row]`.
 fn pixel(
     scene: &Scene,

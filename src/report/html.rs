@@ -10,7 +10,7 @@ const STYLE: &str = "body{font-family:sans-serif;margin:2em;color:#222}\
 table{border-collapse:collapse;margin:1em 0}\
 th,td{border:1px solid #bbb;padding:4px 8px;text-align:left;vertical-align:top}\
 th{background:#eee}img.photo{width:160px;image-rendering:pixelated}\
-img.plot{max-width:100%}figure{display:inline-block;margin:4px}\
+img.plot{max-width:100%}img.relit{width:192px}figure{display:inline-block;margin:4px}\
 figcaption{font-size:small;text-align:center}";
 
 /// Escape text for HTML element content and attribute values.
@@ -81,18 +81,41 @@ pub fn render(report: &dyn Page, root: &Path) -> Result<String> {
             escape(&caption)
         );
     }
+    let relit = report.relit();
+    html += &format!(
+        "<h2>Under new light</h2>\n<p>{}</p>\n",
+        escape(&relit.description())
+    );
+    html += &grid(root, &relit.grid(), "relit")?;
+    html += &format!(
+        "<figure>{}</figure>\n",
+        image(
+            root,
+            &relit.difference_colour_bar,
+            "plot",
+            "difference colour bar"
+        )?
+    );
     html += "<h2>Photos</h2>\n";
-    for (stem, cells) in report.image_grid() {
-        html += &format!("<h3>{}</h3>\n<div>", escape(&stem));
+    html += &grid(root, &report.image_grid(), "photo")?;
+    html += "</body></html>\n";
+    Ok(html)
+}
+
+/// Rows of captioned images under `root` (per row its heading and `(caption, relative path)`
+/// cells), the images of class `class`.
+fn grid(root: &Path, rows: &[(String, Vec<(String, String)>)], class: &str) -> Result<String> {
+    let mut html = String::new();
+    for (heading, cells) in rows {
+        html += &format!("<h3>{}</h3>\n<div>", escape(heading));
         for (caption, path) in cells {
             html += &format!(
                 "<figure>{}<figcaption>{}</figcaption></figure>",
-                image(root, &path, "photo", &caption)?,
-                escape(&caption)
+                image(root, path, class, caption)?,
+                escape(caption)
             );
         }
         html += "</div>\n";
     }
-    html += "</body></html>\n";
     Ok(html)
 }

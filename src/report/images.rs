@@ -6,7 +6,9 @@
 //! | `_residual.png` | `fit - target`, mean over RGB, on a diverging map: blue below the photo, light grey at zero, red above; full colour at +-`scale`, shared by all photos and models; pixels outside the loss are dark grey |
 //!
 //! The diverging map interpolates linearly between the end and middle colours of Moreland's
-//! cool-warm map (Moreland 2009, "Diverging Color Maps for Scientific Visualization").
+//! cool-warm map (Moreland 2009, "Diverging Color Maps for Scientific Visualization"); the
+//! sequential map of magnitudes (roughness) is viridis (van der Walt & Smith 2015, matplotlib),
+//! interpolated linearly between nine of its colours.
 
 use crate::bsdf::Model;
 use crate::capture::image_io::{write_png_rgb8, write_png_tonemapped};
@@ -28,6 +30,28 @@ const RESIDUAL_QUANTILE: f64 = 0.99;
 /// Signed residual of a pixel as the images show it: mean over channels of `fit - target`.
 fn signed_residual(fit: [f64; 3], target: [f64; 3]) -> f64 {
     (0..3).map(|c| fit[c] - target[c]).sum::<f64>() / 3.0
+}
+
+/// sRGB colours of viridis at `t = 0, 1/8, ..., 1`.
+const VIRIDIS: [[f64; 3]; 9] = [
+    [68.0, 1.0, 84.0],
+    [71.0, 45.0, 123.0],
+    [59.0, 82.0, 139.0],
+    [44.0, 114.0, 142.0],
+    [33.0, 145.0, 140.0],
+    [40.0, 174.0, 128.0],
+    [94.0, 201.0, 98.0],
+    [173.0, 220.0, 48.0],
+    [253.0, 231.0, 37.0],
+];
+
+/// Colour of `t` in [0, 1] (clamped; NaN as 0) on the sequential map (module docs).
+pub fn sequential_colour(t: f64) -> [u8; 3] {
+    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+    let x = t * (VIRIDIS.len() - 1) as f64;
+    let i = (x.floor() as usize).min(VIRIDIS.len() - 2);
+    let s = x - i as f64;
+    [0, 1, 2].map(|c| (VIRIDIS[i][c] + s * (VIRIDIS[i + 1][c] - VIRIDIS[i][c])).round() as u8)
 }
 
 /// Colour of residual `r` on the diverging map with full colour at `+-scale`.
@@ -139,5 +163,17 @@ mod tests {
         };
         assert!(redness(-1.0) < redness(-0.5) && redness(-0.5) < redness(0.0));
         assert!(redness(0.0) < redness(0.5) && redness(0.5) < redness(1.0));
+    }
+
+    #[test]
+    fn sequential_map_runs_from_dark_purple_to_yellow_and_brightens() {
+        assert_eq!(sequential_colour(0.0), [68, 1, 84]);
+        assert_eq!(sequential_colour(1.0), [253, 231, 37]);
+        assert_eq!(sequential_colour(7.0), [253, 231, 37]);
+        assert_eq!(sequential_colour(f64::NAN), [68, 1, 84]);
+        assert_eq!(sequential_colour(0.5), [33, 145, 140]);
+        let green = |t: f64| sequential_colour(t)[1];
+        let steps: Vec<u8> = (0..=20).map(|k| green(k as f64 / 20.0)).collect();
+        assert!(steps.windows(2).all(|w| w[0] < w[1]), "{steps:?}");
     }
 }

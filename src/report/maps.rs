@@ -6,12 +6,16 @@
 //! | --- | --- |
 //! | `report.json` | [`MapsReport`] |
 //! | `report.md`, `report.html` | the same pages as the uniform comparison ([`super::Page`]) |
-//! | `maps.png` | one row per model (in `--models` order), one column per map ([`MapsImage`]) |
-//! | `<model>-minus-single_alpha.png`, `_diffuse.png` | per texel `alpha` and mean diffuse albedo of `model` minus `single`, on the residuals' diverging map (red: larger in `model`) with full colour at `+-alpha_scale`, `+-diffuse_scale` |
+//! | `maps.png` | one row per model (in `--models` order), one column per map ([`MapsImage`]), each texel a square of [`texel_pixels`] pixels (nearest neighbour, about [`MAP_PIXELS`] pixels a map) |
+//! | `roughness_colour_bar.png` | the roughness column's colour bar |
+//! | `<model>-minus-single_alpha.png`, `_diffuse.png` | per texel `alpha` and mean diffuse albedo of `model` minus `single`, on the residuals' diverging map (red: larger in `model`) with full colour at `+-alpha_scale`, `+-diffuse_scale`, upscaled as `maps.png`; `_alpha_bar.png`, `_diffuse_bar.png` their colour bars |
+//! | `relit/` | every model's fit under the bundled sky and its glTF export ([`super::relit`]) |
 //! | `<model>/fit.json`, `<model>/fit.maps/` | the model's maps fit file, as `fit --maps` writes it |
 //! | `<model>/<stem>_target.png`, `_fit.png`, `_residual.png` | per photo, held-out one included ([`super::images`]) |
 
-use super::images::{diverging_colour, magnitude_scale};
+use super::images::{diverging_colour, magnitude_scale, sequential_colour};
+use super::plots::colour_bar;
+use super::relit::Relit;
 use super::{photo_grid, Page, Table};
 use crate::bsdf::Model;
 use crate::capture::image_io::{linear_to_srgb, write_png_rgb8};
@@ -24,8 +28,18 @@ use std::path::Path;
 
 /// The map comparison image, relative to the report folder.
 pub const MAPS_IMAGE: &str = "maps.png";
+/// The roughness column's colour bar, relative to the report folder.
+pub const ROUGHNESS_BAR: &str = "roughness_colour_bar.png";
 /// Pixels of white between the cells of [`MAPS_IMAGE`].
-pub const GAP: usize = 2;
+pub const GAP: usize = 4;
+/// Width a map is upscaled to, at least (64 texels become 256 pixels).
+pub const MAP_PIXELS: usize = 256;
+
+/// Pixels per texel side in the map images: a map [`MAP_PIXELS`] wide or wider, or 1:1 when
+/// the grid is wider already.
+pub fn texel_pixels(grid: TexelGrid) -> usize {
+    MAP_PIXELS.div_ceil(grid.width).max(1)
+}
 /// Colour of a map a model does not have (e.g. `specular` with a known Fresnel).
 const ABSENT: [u8; 3] = [40, 40, 40];
 
@@ -48,16 +62,19 @@ pub struct MapsModelRow {
 }
 
 /// The layout of [`MAPS_IMAGE`]: `rows` (models) by `columns` (maps) cells of the texel grid's
-/// size, [`GAP`] pixels apart.
+/// size times `texel_pixels`, [`GAP`] pixels apart.
 #[derive(Clone, Debug, Serialize)]
 pub struct MapsImage {
     pub path: String,
     pub rows: Vec<Model>,
     pub columns: Vec<&'static str>,
     pub cell: [usize; 2],
+    /// Pixels per texel side.
+    pub texel_pixels: usize,
     pub gap: usize,
     /// Encoding of each map in the image.
     pub encoding: &'static str,
+    pub roughness_colour_bar: String,
 }
 
 /// A difference's images and their colour scales.
@@ -68,6 +85,8 @@ pub struct DifferenceImages {
     /// Differences shown at full colour (the 99th percentile of their magnitudes).
     pub alpha_scale: f64,
     pub diffuse_scale: f64,
+    pub alpha_colour_bar: String,
+    pub diffuse_colour_bar: String,
 }
 
 /// What a multi-bounce model changes against `single`, with its images.
@@ -94,6 +113,7 @@ pub struct MapsReport {
     pub maps_image: MapsImage,
     /// Each model other than `single` minus `single` (empty without `single`).
     pub differences: Vec<DifferenceRow>,
+    pub relit: Relit,
     pub residual_scale: f64,
     pub verdicts: Vec<String>,
 }
@@ -108,10 +128,10 @@ fn map_colour(maps: &MaterialMaps, map: &str, t: usize) -> [u8; 3] {
     match map {
         "diffuse" => maps.diffuse.as_ref().map(|d| d[t].map(srgb8)),
         "specular" => maps.specular.as_ref().map(|s| s[t].map(srgb8)),
-        "roughness" => maps.roughness.as_ref().map(|a| {
-            let [ax, ay] = a[t];
-            [ax, ay, (ax * ay).sqrt()].map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-        }),
+        "roughness" => maps
+            .roughness
+            .as_ref()
+            .map(|_| sequential_colour(maps.alpha(t))),
         _ => maps
             .normal
             .as_ref()
@@ -120,37 +140,63 @@ fn map_colour(maps: &MaterialMaps, map: &str, t: usize) -> [u8; 3] {
     .unwrap_or(ABSENT)
 }
 
-/// Writes [`MAPS_IMAGE`] under `root`: a row per `(model, maps)`, a column per map (`normal`
-/// only when some model has one); returns its layout.
+/// Writes [`MAPS_IMAGE`] and the roughness colour bar under `root`: a row per `(model, maps)`,
+/// a column per map (`normal` only when some model has one); returns its layout.
 pub fn write_maps_image(root: &Path, fits: &[(Model, &MaterialMaps)]) -> Result<MapsImage> {
     let grid = fits[0].1.grid;
+    let k = texel_pixels(grid);
     let mut columns = vec!["diffuse", "specular", "roughness"];
     if fits.iter().any(|(_, m)| m.normal.is_some()) {
         columns.push("normal");
     }
+    let cell = [grid.width * k, grid.height * k];
     let (c, r) = (columns.len(), fits.len());
-    let width = c * grid.width + (c - 1) * GAP;
-    let height = r * grid.height + (r - 1) * GAP;
+    let width = c * cell[0] + (c - 1) * GAP;
+    let height = r * cell[1] + (r - 1) * GAP;
     let mut bytes = vec![255u8; width * height * 3];
     for (row, (_, maps)) in fits.iter().enumerate() {
         for (column, map) in columns.iter().enumerate() {
-            for t in 0..grid.len() {
-                let x = column * (grid.width + GAP) + t % grid.width;
-                let y = row * (grid.height + GAP) + t / grid.width;
-                let i = 3 * (y * width + x);
-                bytes[i..i + 3].copy_from_slice(&map_colour(maps, map, t));
-            }
+            let origin = [column * (cell[0] + GAP), row * (cell[1] + GAP)];
+            let colours: Vec<[u8; 3]> = (0..grid.len()).map(|t| map_colour(maps, map, t)).collect();
+            paint_upscaled(&mut bytes, width, origin, grid, k, &colours);
         }
     }
     write_rgb8(&root.join(MAPS_IMAGE), &bytes, width, height)?;
+    let ticks = [0.0, 0.25, 0.5, 0.75, 1.0].map(|t| (t, format!("{t}")));
+    colour_bar(
+        &root.join(ROUGHNESS_BAR),
+        "roughness alpha (sqrt(alpha_x alpha_y))",
+        sequential_colour,
+        &ticks,
+    )?;
     Ok(MapsImage {
         path: MAPS_IMAGE.into(),
         rows: fits.iter().map(|(m, _)| *m).collect(),
         columns,
-        cell: [grid.width, grid.height],
+        cell,
+        texel_pixels: k,
         gap: GAP,
-        encoding: "diffuse and specular (F0): linear value as sRGB; roughness: grey level = alpha (black 0, white 1 and above; anisotropic: alpha_x in red, alpha_y in green); normal: (n + 1) / 2 per channel; dark grey: no such map",
+        encoding: "each texel a square, nearest neighbour; diffuse and specular (F0): linear value as sRGB; roughness: alpha on viridis (colour bar; anisotropic texels: sqrt(alpha_x alpha_y)), 1 and above yellow; normal: (n + 1) / 2 per channel; dark grey: no such map",
+        roughness_colour_bar: ROUGHNESS_BAR.into(),
     })
+}
+
+/// Paints the texel `colours` of `grid` into the RGB `bytes` of an image `width` pixels wide,
+/// each texel a `k` x `k` square, the grid's top-left corner at `origin`.
+fn paint_upscaled(
+    bytes: &mut [u8],
+    width: usize,
+    origin: [usize; 2],
+    grid: TexelGrid,
+    k: usize,
+    colours: &[[u8; 3]],
+) {
+    for y in 0..grid.height * k {
+        for x in 0..grid.width * k {
+            let i = 3 * ((origin[1] + y) * width + origin[0] + x);
+            bytes[i..i + 3].copy_from_slice(&colours[(y / k) * grid.width + x / k]);
+        }
+    }
 }
 
 fn write_rgb8(path: &Path, bytes: &[u8], width: usize, height: usize) -> Result<()> {
@@ -158,7 +204,8 @@ fn write_rgb8(path: &Path, bytes: &[u8], width: usize, height: usize) -> Result<
     write_png_rgb8(path, bytes, size(width)?, size(height)?)
 }
 
-/// Writes the difference images of `difference` under `root` and returns them.
+/// Writes the difference images of `difference`, upscaled as [`MAPS_IMAGE`], and their colour
+/// bars under `root`, and returns them.
 pub fn write_difference_images(
     root: &Path,
     difference: &MapsDifference,
@@ -166,13 +213,22 @@ pub fn write_difference_images(
     grid: TexelGrid,
 ) -> Result<DifferenceImages> {
     let name = |what: &str| format!("{}-minus-single_{what}.png", difference.model);
+    let k = texel_pixels(grid);
     let write = |what: &str, values: &[f64]| -> Result<(String, f64)> {
         let scale = magnitude_scale(values.iter().copied());
-        let bytes: Vec<u8> = values
-            .iter()
-            .flat_map(|&v| diverging_colour(v, scale))
-            .collect();
-        write_rgb8(&root.join(name(what)), &bytes, grid.width, grid.height)?;
+        let colours: Vec<[u8; 3]> = values.iter().map(|&v| diverging_colour(v, scale)).collect();
+        let [width, height] = [grid.width * k, grid.height * k];
+        let mut bytes = vec![0u8; width * height * 3];
+        paint_upscaled(&mut bytes, width, [0, 0], grid, k, &colours);
+        write_rgb8(&root.join(name(what)), &bytes, width, height)?;
+        let ticks =
+            [-1.0, -0.5, 0.0, 0.5, 1.0].map(|t| ((t + 1.0) / 2.0, format!("{:+.3}", t * scale)));
+        colour_bar(
+            &root.join(name(&format!("{what}_bar"))),
+            &format!("{what}: {} - single", difference.model),
+            |t| diverging_colour(2.0 * t - 1.0, 1.0),
+            &ticks,
+        )?;
         Ok((name(what), scale))
     };
     let (alpha, alpha_scale) = write("alpha", &deltas.alpha)?;
@@ -182,6 +238,8 @@ pub fn write_difference_images(
         diffuse,
         alpha_scale,
         diffuse_scale,
+        alpha_colour_bar: name("alpha_bar"),
+        diffuse_colour_bar: name("diffuse_bar"),
     })
 }
 
@@ -383,24 +441,40 @@ impl Page for MapsReport {
             ),
             self.maps_image.path.clone(),
         )];
+        figures.push((
+            "Roughness colour bar".into(),
+            self.maps_image.roughness_colour_bar.clone(),
+        ));
         for d in &self.differences {
-            let images = &d.images;
+            let (images, model) = (&d.images, d.difference.model);
             figures.push((
                 format!(
-                    "{} minus single: alpha (red: rougher in {}; full colour at +-{:.3})",
-                    d.difference.model, d.difference.model, images.alpha_scale
+                    "{model} minus single: alpha (red: rougher in {model}; full colour at +-{:.3})",
+                    images.alpha_scale
                 ),
                 images.alpha.clone(),
             ));
             figures.push((
+                format!("{model} minus single: alpha colour bar"),
+                images.alpha_colour_bar.clone(),
+            ));
+            figures.push((
                 format!(
-                    "{} minus single: diffuse albedo (full colour at +-{:.3})",
-                    d.difference.model, images.diffuse_scale
+                    "{model} minus single: diffuse albedo (full colour at +-{:.3})",
+                    images.diffuse_scale
                 ),
                 images.diffuse.clone(),
             ));
+            figures.push((
+                format!("{model} minus single: diffuse colour bar"),
+                images.diffuse_colour_bar.clone(),
+            ));
         }
         figures
+    }
+
+    fn relit(&self) -> &Relit {
+        &self.relit
     }
 
     fn image_grid(&self) -> Vec<(String, Vec<(String, String)>)> {

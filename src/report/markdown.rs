@@ -38,9 +38,23 @@ pub fn render(report: &dyn Page) -> String {
     for (caption, path) in report.figures() {
         md += &format!("![{caption}]({path})\n\n");
     }
+    let relit = report.relit();
+    md += &format!("## Under new light\n\n{}\n\n", relit.description());
+    md += &grid(&relit.grid());
+    md += &format!(
+        "![difference colour bar]({})\n\n",
+        relit.difference_colour_bar
+    );
     md += "## Photos\n\n";
-    for (stem, cells) in report.image_grid() {
-        md += &format!("### {stem}\n\n");
+    md += &grid(&report.image_grid());
+    md
+}
+
+/// Rows of captioned images, each a heading and a one-row table of its cells.
+fn grid(rows: &[(String, Vec<(String, String)>)]) -> String {
+    let mut md = String::new();
+    for (heading, cells) in rows {
+        md += &format!("### {heading}\n\n");
         let captions: Vec<&str> = cells.iter().map(|c| c.0.as_str()).collect();
         md += &row(&captions);
         md += &row(&vec!["---"; cells.len()]);

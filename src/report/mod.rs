@@ -8,6 +8,7 @@
 //! | `report.html` | the same, self-contained (images as base64 data URIs, inline CSS) | [`html`] |
 //! | `<model>/<stem>_target.png`, `_fit.png`, `_residual.png` | per model and photo | [`images`] |
 //! | `loss_curves.png`, `posterior.png` | plots | [`plots`] |
+//! | `relit/` | each model's fit under the bundled sky on a sphere and the sample, its glTF export beside it, its lobe | [`relit`] |
 //!
 //! `compare --maps` writes a [`maps::MapsReport`] instead, through the same pages ([`Page`]).
 //!
@@ -21,6 +22,7 @@ pub mod images;
 pub mod maps;
 pub mod markdown;
 pub mod plots;
+pub mod relit;
 
 use crate::bsdf::Model;
 use crate::fit::bayes::posterior::{ParamSummary, Posterior as FitPosterior};
@@ -28,6 +30,7 @@ use crate::fit::bayes::selection::{HeldOutRanking, Selection};
 use crate::fit::{edge_tint, ModelFit, TracePoint};
 use crate::loss::LossKind;
 use crate::random::mean_and_standard_error;
+use relit::Relit;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -237,6 +240,7 @@ pub struct Report {
     pub residual_scale: f64,
     /// One sentence per criterion.
     pub verdicts: Vec<String>,
+    pub relit: Relit,
 }
 
 impl Report {
@@ -457,6 +461,8 @@ pub trait Page {
     fn figures(&self) -> Vec<(String, String)>;
     /// Per photo: its stem and `(caption, relative path)` cells.
     fn image_grid(&self) -> Vec<(String, Vec<(String, String)>)>;
+    /// The fits under new light.
+    fn relit(&self) -> &Relit;
 }
 
 impl Page for Report {
@@ -495,5 +501,9 @@ impl Page for Report {
 
     fn image_grid(&self) -> Vec<(String, Vec<(String, String)>)> {
         Report::image_grid(self)
+    }
+
+    fn relit(&self) -> &Relit {
+        &self.relit
     }
 }

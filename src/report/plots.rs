@@ -37,15 +37,60 @@ pub(crate) fn draw_png(
         &DrawingArea<BitMapBackend, plotters::coord::Shift>,
     ) -> std::result::Result<(), Box<dyn std::error::Error>>,
 ) -> Result<()> {
+    draw_png_sized(path, (WIDTH, HEIGHT), draw)
+}
+
+/// Draw into a white canvas of `(width, height)` with `draw` and write it to `path` as PNG.
+fn draw_png_sized(
+    path: &Path,
+    (width, height): (u32, u32),
+    draw: impl FnOnce(
+        &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    ) -> std::result::Result<(), Box<dyn std::error::Error>>,
+) -> Result<()> {
     register_font();
-    let mut buffer = vec![0u8; (WIDTH * HEIGHT * 3) as usize];
+    let mut buffer = vec![0u8; (width * height * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut buffer, (WIDTH, HEIGHT)).into_drawing_area();
+        let root = BitMapBackend::with_buffer(&mut buffer, (width, height)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| Error::io(path, e))?;
         draw(&root).map_err(|e| Error::io(path, e))?;
         root.present().map_err(|e| Error::io(path, e))?;
     }
-    write_png_rgb8(path, &buffer, WIDTH, HEIGHT)
+    write_png_rgb8(path, &buffer, width, height)
+}
+
+/// Size of a colour bar image.
+pub const COLOUR_BAR: (u32, u32) = (384, 64);
+
+/// A horizontal colour bar: `colour(t)` for `t` from 0 at the left to 1 at the right, tick
+/// marks with their labels at `(t, label)` of `ticks`, and `caption` above.
+pub fn colour_bar(
+    path: &Path,
+    caption: &str,
+    colour: impl Fn(f64) -> [u8; 3],
+    ticks: &[(f64, String)],
+) -> Result<()> {
+    let (width, _) = COLOUR_BAR;
+    let (left, right, top, bottom) = (16i32, width as i32 - 16, 22i32, 40i32);
+    draw_png_sized(path, COLOUR_BAR, |root| {
+        let font: TextStyle = ("sans-serif", 14).into_font().into();
+        root.draw(&Text::new(caption.to_string(), (left, 3), font.clone()))?;
+        for x in left..right {
+            let [r, g, b] = colour(f64::from(x - left) / f64::from(right - left - 1));
+            root.draw(&Rectangle::new(
+                [(x, top), (x + 1, bottom)],
+                RGBColor(r, g, b).filled(),
+            ))?;
+        }
+        for (t, label) in ticks {
+            let x = left + (t * f64::from(right - left - 1)).round() as i32;
+            root.draw(&PathElement::new(vec![(x, bottom), (x, bottom + 4)], BLACK))?;
+            let (text_width, _) = root.estimate_text_size(label, &font)?;
+            let at = (x - text_width as i32 / 2).clamp(0, width as i32 - text_width as i32);
+            root.draw(&Text::new(label.clone(), (at, bottom + 6), font.clone()))?;
+        }
+        Ok(())
+    })
 }
 
 /// Loss against evaluations for every model (the optimiser traces), log y.

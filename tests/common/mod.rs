@@ -80,6 +80,11 @@ pub fn folder_entries(folder: &Path) -> Vec<String> {
     names
 }
 
+/// The PNG's width and height.
+pub fn png_size(path: &Path) -> (u32, u32) {
+    image::image_dimensions(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
 pub fn read_json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
