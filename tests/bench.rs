@@ -43,6 +43,8 @@ fn quick_json_has_the_contract_fields_and_consistent_values() {
         "--fit-sets",
         repo("datasets/copper-flash").to_str().unwrap(),
         "--no-maps",
+        "--relight-size",
+        "32",
         "-o",
         out.to_str().unwrap(),
     ]);
@@ -144,7 +146,19 @@ fn quick_json_has_the_contract_fields_and_consistent_values() {
             assert!(j.get(key).is_some(), "missing {key} in {j}");
         }
         assert!(j["seconds"].as_f64().unwrap() > 0.0, "{j}");
-        assert_eq!(j["photos"], 9);
+        assert_eq!(j["photos"], if j["job"] == "relight" { 1 } else { 9 });
+    }
+    // The relight rows: a 32x32 sphere per model of --relight-models (single, kulla-conty by
+    // default), each timed against single's in the same run.
+    let relight: Vec<&Value> = jobs.iter().filter(|j| j["job"] == "relight").collect();
+    let models: Vec<&Value> = relight.iter().map(|j| &j["model"]).collect();
+    assert_eq!(models, ["single", "kulla-conty"]);
+    let single_seconds = relight[0]["seconds"].as_f64().unwrap();
+    for j in &relight {
+        assert_eq!(j["resolution"], serde_json::json!([32, 32]));
+        assert_eq!(j["pixels"], 32 * 32);
+        let ratio = j["seconds_vs_single"].as_f64().unwrap();
+        assert!((ratio - j["seconds"].as_f64().unwrap() / single_seconds).abs() < 1e-12);
     }
     // The kernel row times the scalar and the batch kernel on the same pairs.
     let kernel = &v["kernel"];

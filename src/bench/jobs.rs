@@ -5,6 +5,7 @@
 //! | --- | --- | --- |
 //! | `render` | [`render_all`] of the records of a capture template (built once, 1 sample per pixel, no targets) with the template's material under each model; after one untimed render, the median of repeated renders until [`RenderTiming::min_seconds`] have passed | `false`: every pixel, exactly; `true`: only the pixels that enter a loss (weight > 0), through the [`RenderPlan`] a fit would use (the skips `--no-skip` leaves on); `rel_error_vs_exact` is the RMS difference from the exact render relative to its RMS |
 //! | `maps-fit` | a maps fit ([`crate::maps::fit`]) of each model to a photo set at each texel grid, leaving the last photo out: wall and CPU seconds of the fit and the prediction of every photo, texels per second, peak resident memory, the held-out photo's relative error and the naive baseline (the mean of the other photos); `seconds_vs_single` against the `single` maps fit of the same set and grid | none (a maps fit evaluates each pixel at its centre, exactly) |
+//! | `relight` | a relit preview ([`crate::relight::render`]) of the render job's material under each model on the sphere under the bundled sky, `size` pixels square at `samples` samples per pixel, once; `seconds_vs_single` against `single`'s in the same run | none |
 //! | `fit` | [`fit_model`] of each model to a photo set (records built once, optionally halved in resolution `halvings` times); the final loss and `alpha_rel_error = (alpha - alpha_true) / alpha_true` against the set's `material.json` | `false`: `--no-skip all`; `true`: every skip of [`crate::render::plan`] that `--no-skip` leaves on (pixels of weight 0 are never rendered by a fit) |
 //!
 //! `skipped_pixels` says how many pixels of weight 0 were left out; `plan` what the render
@@ -16,8 +17,11 @@ use crate::capture::Capture;
 use crate::error::Result;
 use crate::fit::{fit_model, FitOptions};
 use crate::maps::fit::HeldOutPhoto;
-use crate::maps::TexelGrid;
+use crate::maps::{MaterialMaps, TexelGrid};
 use crate::material::Material;
+use crate::relight::environment::Environment;
+use crate::relight::geometry::Geometry;
+use crate::relight::{render_under, Scene};
 use crate::render::plan::{PlanSummary, RenderPlan, Skips};
 use crate::render::{render_all, render_material};
 use crate::shading::ShadingRecords;
@@ -32,6 +36,19 @@ pub enum JobKind {
     Render,
     Fit,
     MapsFit,
+    Relight,
+}
+
+impl JobKind {
+    /// The job's name in the text table.
+    pub fn name(self) -> &'static str {
+        match self {
+            JobKind::Render => "render",
+            JobKind::Fit => "fit",
+            JobKind::MapsFit => "maps-fit",
+            JobKind::Relight => "relight",
+        }
+    }
 }
 
 /// One row of the job table (the `--json` contract of issue #5 plus context).
@@ -89,6 +106,29 @@ impl JobRow {
         records: &ShadingRecords,
         pixels: usize,
     ) -> Self {
+        let resolution = records
+            .photos
+            .first()
+            .map_or([0, 0], |p| [p.width, p.height]);
+        let images = (resolution, records.photos.len());
+        JobRow::of_images(
+            job,
+            model,
+            skip,
+            images,
+            (pixels, records.pixel_count() - pixels),
+        )
+    }
+
+    /// A row of `images` = `(resolution, count)`, `(pixels, skipped)` of them worked on and
+    /// skipped, its measurements still to be filled in.
+    fn of_images(
+        job: JobKind,
+        model: Model,
+        skip: bool,
+        (resolution, photos): ([usize; 2], usize),
+        (pixels, skipped_pixels): (usize, usize),
+    ) -> Self {
         JobRow {
             job,
             model,
@@ -100,13 +140,10 @@ impl JobRow {
             alpha: None,
             alpha_rel_error: None,
             evaluations: None,
-            resolution: records
-                .photos
-                .first()
-                .map_or([0, 0], |p| [p.width, p.height]),
-            photos: records.photos.len(),
+            resolution,
+            photos,
             pixels,
-            skipped_pixels: records.pixel_count() - pixels,
+            skipped_pixels,
             plan: None,
             rel_error_vs_exact: None,
             set: None,
@@ -143,6 +180,42 @@ impl JobRow {
             peak_memory_mb: peak_bytes.map(|b| b as f64 / (1u64 << 20) as f64),
             ..JobRow::new(JobKind::MapsFit, model, false, records, used)
         }
+    }
+}
+
+/// Time a relit preview of `material` under `model`: the sphere under the bundled sky, `size`
+/// pixels square, `samples` samples per pixel, one frame (the row's `pixels` are the image's).
+pub fn relight_job(
+    (material, model): (&Material, Model),
+    size: usize,
+    samples: usize,
+    seed: u64,
+) -> JobRow {
+    let maps = MaterialMaps::uniform(&Material {
+        model,
+        ..material.clone()
+    });
+    let sky = Environment::sky();
+    let scene = Scene {
+        material: &maps,
+        geometry: Geometry::Sphere,
+        size,
+        samples,
+        seed,
+    };
+    let (started, cpu) = (Instant::now(), process_seconds());
+    std::hint::black_box(render_under(&scene, &sky));
+    JobRow {
+        seconds: started.elapsed().as_secs_f64(),
+        cpu_seconds: process_seconds() - cpu,
+        repeats: 1,
+        ..JobRow::of_images(
+            JobKind::Relight,
+            model,
+            false,
+            ([size, size], 1),
+            (size * size, 0),
+        )
     }
 }
 

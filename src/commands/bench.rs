@@ -2,10 +2,10 @@
 //! `{"estimators": [...], "jobs": [...], ...}`), and with `-o DIR` a folder holding
 //! `bench.json`, `bench.txt` (the tables) and `bench.png` (error against run time).
 //!
-//! | run | converged values | render job | fit jobs | maps fit jobs |
-//! | --- | --- | --- | --- | --- |
-//! | full | 100000 samples | 9 photos at 256x256, repeated for 1 s | each set of `--fit-sets` at full resolution, every model | each set of `--maps-sets`, each of `--maps-models`, texels 64 and the photos' width, up to 4 bases |
-//! | `--quick` | 4096 samples | 9 photos at 128x128, once | each set halved 4 times, every model | `single` and `kulla-conty` at texels 32 only, up to 2 bases |
+//! | run | converged values | render job | relight jobs | fit jobs | maps fit jobs |
+//! | --- | --- | --- | --- | --- | --- |
+//! | full | 100000 samples | 9 photos at 256x256, repeated for 1 s | each of `--relight-models`: a 512x512 sphere under the bundled sky, 64 samples per pixel | each set of `--fit-sets` at full resolution, every model | each set of `--maps-sets`, each of `--maps-models`, texels 64 and the photos' width, up to 4 bases |
+//! | `--quick` | 4096 samples | 9 photos at 128x128, once | the same at 128x128, 16 samples per pixel | each set halved 4 times, every model | `single` and `kulla-conty` at texels 32 only, up to 2 bases |
 //!
 //! The fit jobs use the options of `fit` (the same flags, e.g. `--pixel-samples`,
 //! `--max-iters`), and `--seed` seeds everything.
@@ -63,6 +63,16 @@ pub struct BenchArgs {
     /// Side of the render job's square photos (default 256; with --quick 128).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096))]
     pub render_resolution: Option<usize>,
+    /// Models of the relight jobs (the render job's material on a sphere under the bundled
+    /// sky); `single` is their baseline.
+    #[arg(long, value_delimiter = ',', default_value = "single,kulla-conty")]
+    pub relight_models: Vec<Model>,
+    /// Side of the relight jobs' square images (default 512; with --quick 128).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096))]
+    pub relight_size: Option<usize>,
+    /// Samples per pixel of the relight jobs (default 64; with --quick 16).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096))]
+    pub relight_spp: Option<usize>,
     /// Photo sets of the fit jobs (comma-separated), each `PATH` or `PATH:conductor` /
     /// `PATH:schlick` to fit that Fresnel family there (otherwise `--fresnel`'s); a set's
     /// `material.json`, if any, gives the true roughness. By default the rectified flash set and
@@ -113,6 +123,7 @@ struct Settings {
     models: Vec<Model>,
     estimators: EstimatorSettings,
     render: Option<RenderSettings>,
+    relight: Option<RelightSettings>,
     fit: Option<FitSettings>,
     maps: Option<MapsSettings>,
 }
@@ -123,6 +134,13 @@ struct RenderSettings {
     material: PathBuf,
     resolution: usize,
     min_seconds: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+struct RelightSettings {
+    models: Vec<Model>,
+    size: usize,
+    samples: usize,
 }
 
 /// A photo set of the fit jobs and the Fresnel family fitted there (`None`: `--fresnel`'s).
@@ -227,6 +245,11 @@ impl BenchArgs {
                     .render_resolution
                     .unwrap_or(if quick { 128 } else { 256 }),
                 min_seconds: if quick { 0.0 } else { 1.0 },
+            }),
+            relight: (!self.no_jobs).then(|| RelightSettings {
+                models: self.relight_models.clone(),
+                size: self.relight_size.unwrap_or(if quick { 128 } else { 512 }),
+                samples: self.relight_spp.unwrap_or(if quick { 16 } else { 64 }),
             }),
             fit: (!self.no_jobs).then(|| FitSettings {
                 sets: self.fit_sets.clone(),
@@ -344,6 +367,21 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
             ));
         }
         finish(&bar);
+    }
+    if let (Some(r), Some((_, material))) = (&settings.relight, &render_inputs) {
+        let first_row = job_rows.len();
+        for &model in &r.models {
+            if !args.quiet {
+                eprintln!("bench: relight {model}");
+            }
+            job_rows.push(jobs::relight_job(
+                (material, model),
+                r.size,
+                r.samples,
+                settings.estimators.seed,
+            ));
+        }
+        jobs::ratios_to_single(&mut job_rows[first_row..]);
     }
     for (set, records, truth) in &fit_inputs {
         let first_row = job_rows.len();
@@ -504,6 +542,16 @@ fn notes(settings: &Settings, estimators: &[EstimatorRow], jobs: &[JobRow]) -> V
             r.min_seconds
         ));
     }
+    if let (Some(r), Some(render)) = (&settings.relight, &settings.render) {
+        notes.push(format!(
+            "relight: {} under each of {} on the unit sphere under the bundled sky, {}x{} pixels, {} samples per pixel (two directions each, MIS), one frame, in memory (no files); /single: over the single relight of this run",
+            render.material.display(),
+            r.models.iter().map(|m| m.name()).collect::<Vec<_>>().join(", "),
+            r.size,
+            r.size,
+            r.samples
+        ));
+    }
     if let Some(f) = &settings.fit {
         notes.push(format!(
             "fit: {} halved {} times, {} samples per pixel, at most {} iterations; skip=false is --no-skip all (pixels of weight 0 are never rendered), skip=true every skip of render::plan that --no-skip leaves on; alpha_rel_error is signed, against the set's material.json (the model that made the photos may differ from the fitted one); seconds_vs_single (/single) is the fit's time over the single fit of the same set and skip",
@@ -644,7 +692,7 @@ fn tables(report: &BenchReport) -> String {
         {
             out += &format!(
                 "{:<7} {:<12} {:>5} {:>9.4} {:>9.3} {:>4} {:>9} {:>8} {:>7} {:>6} {:>8} {:>10} {:>7} {:>9} {:>6} {:>7}\n",
-                if j.job == jobs::JobKind::Render { "render" } else { "fit" },
+                j.job.name(),
                 j.model.name(),
                 j.skip,
                 j.seconds,
@@ -688,7 +736,7 @@ fn tables(report: &BenchReport) -> String {
             let [w, h] = j.texels.unwrap_or_default();
             out += &format!(
                 "{:<8} {:<12} {:>11} {:>9.2} {:>9.2} {:>9} {:>8} {:>7} {:>5} {:>9} {:>9}  {}\n",
-                "maps-fit",
+                j.job.name(),
                 j.model.name(),
                 format!("{w}x{h}"),
                 j.seconds,
