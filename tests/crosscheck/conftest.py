@@ -83,3 +83,13 @@ def exported_scenes(tmp_path, capture):
     (tmp_path / "material.json").write_text(json.dumps(material))
     run("export", tmp_path / "material.json", "--format", "mitsuba", "--scene", folder, "-o", tmp_path / "scenes")
     return folder, material
+
+
+@pytest.fixture(scope="session")
+def two_materials_report(tmp_path_factory):
+    """The report folder of `compare --maps` on datasets/two-materials (single and kulla-conty,
+    photo 8 held out), made once for every test that reads it."""
+    folder = tmp_path_factory.mktemp("compare") / "two-materials"
+    run("compare", ROOT / "datasets" / "two-materials", "--maps", "--models", "single,kulla-conty",
+        "--holdout-photo", 8, "--quiet", "-o", folder)
+    return folder
