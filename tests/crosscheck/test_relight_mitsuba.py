@@ -24,13 +24,16 @@ pixel there sees it along its normal, where the two G2 agree. The export turns S
 conductor with the same F0 whose edge tint follows Schlick's curve (the export's notes state the
 largest Fresnel difference): that difference is part of what is measured. Compared: the mean
 relative difference per pixel and channel over the pixels wholly on the surface (all four
-corners inside the sphere's disc), both renders Monte Carlo at many samples per pixel.
+corners inside the sphere's disc), both renders Monte Carlo at 4096 samples per pixel on 32 x 32
+pixels: at 256 samples on 96 x 96 the per-pixel noise alone is 4.4%, as much between two seeds of
+relight as between relight and Mitsuba. Measured: uniform 1.09%, maps 0.89% (4 x 4 blocks: 0.31%
+and 0.35%, the rest being noise).
 """
 
+import json
 import time
 import xml.etree.ElementTree as ET
 
-import json
 import mitsuba as mi
 import numpy as np
 import pytest
