@@ -286,7 +286,10 @@ fn run_maps_compare(args: &CompareArgs) -> Result<()> {
         std::fs::create_dir(&model_folder).map_err(|e| Error::io(&model_folder, e))?;
         write_model_images(&root, model, &run.records, &run.predicted, display, scale)?;
         let fit_file = model_folder.join("fit.json");
-        run.fit.maps.save(&fit_file, set.fit_file_fields(run))?;
+        let maps_folder = MaterialMaps::folder_beside(&fit_file);
+        std::fs::create_dir(&maps_folder).map_err(|e| Error::io(&maps_folder, e))?;
+        let (maps, fields) = set.write_fit_images(run, &fit_file, &maps_folder)?;
+        run.fit.maps.save_json(&fit_file, maps, fields)?;
         rows.push(MapsModelRow {
             model,
             seconds: run.fit.seconds,

@@ -1,7 +1,9 @@
 //! `bouncefit fit DIR --maps`: fit material maps ([`crate::maps::pipeline`]) and write a maps fit
 //! file (`FIT.json` naming `FIT.maps/diffuse.png`, `specular.png`, `roughness.exr`,
-//! `normal.png`) plus residual images, every output staged and committed at the end. Pixels are
-//! evaluated at their centre (one sub-sample), so each sees exactly one texel.
+//! `normal.png`, and under `uncertainty` the per-texel standard deviations
+//! `roughness_sd.exr`, `specular_sd.exr`, `diffuse_sd.exr`) plus residual images, every output
+//! staged and committed at the end. Pixels are evaluated at their centre (one sub-sample), so
+//! each sees exactly one texel.
 
 use super::fit_args::FitArgs;
 use super::images::write_photo_images;
@@ -48,17 +50,10 @@ pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
         display,
         "",
     )?;
-    let folder_name = MaterialMaps::folder_beside(&output);
-    let prefix = folder_name
-        .file_name()
-        .unwrap_or_default()
-        .to_string_lossy();
-    let maps_entry = run.fit.maps.write_images(&maps_folder.path(""), &prefix)?;
+    let (maps_entry, fields) = set.write_fit_images(&run, &output, &maps_folder.path(""))?;
     maps_folder.commit()?;
     residual_folder.commit()?;
-    run.fit
-        .maps
-        .save_json(&output, maps_entry, set.fit_file_fields(&run))?;
+    run.fit.maps.save_json(&output, maps_entry, fields)?;
     println!("{}", output.display());
     Ok(())
 }

@@ -18,6 +18,7 @@
 //! them). Errors name the file and the map or texel: a missing image, images of different
 //! sizes, non-finite or out-of-range texels, a normal below the surface.
 
+use super::fit::Uncertainty;
 use super::{AnyMaterial, MaterialMaps, TexelGrid};
 use crate::capture::atomic_file::write_atomically;
 use crate::capture::image_io::{load_image, srgb_to_linear, write_exr, ColorEncoding};
@@ -335,6 +336,31 @@ impl MaterialMaps {
                 }
             }
             entries.insert(name.into(), Value::String(format!("{prefix}/{file}")));
+        }
+        Ok(Value::Object(entries))
+    }
+}
+
+impl Uncertainty {
+    /// Writes the standard-deviation maps into `folder` (which must exist) as EXR, each file
+    /// atomically, and returns the fit file's `uncertainty` object: each map as `<prefix>/<file>`
+    /// (`prefix`: the folder as the fit file sees it) with the coordinate its sd is of.
+    pub fn write_images(&self, folder: &Path, prefix: &str) -> Result<Value> {
+        let TexelGrid { width, height } = self.grid;
+        let mut entries = serde_json::Map::new();
+        entries.insert("method".into(), json!("laplace"));
+        for (name, texels, sd_of) in [
+            ("roughness_sd", Some(&self.roughness), "ln_alpha"),
+            ("specular_sd", self.specular.as_ref(), "f0"),
+            ("diffuse_sd", Some(&self.diffuse), "albedo"),
+        ] {
+            let Some(texels) = texels else { continue };
+            let file = format!("{name}.exr");
+            write_exr(&folder.join(&file), texels, width, height)?;
+            entries.insert(
+                name.into(),
+                json!({"file": format!("{prefix}/{file}"), "sd_of": sd_of}),
+            );
         }
         Ok(Value::Object(entries))
     }

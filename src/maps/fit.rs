@@ -264,6 +264,25 @@ pub struct MapsFit {
     /// each material lies on the sample (`compare --maps` reports differences per basis).
     #[serde(skip)]
     pub labels: Vec<usize>,
+    /// Every texel's posterior standard deviations ([`texel_uncertainty`]).
+    #[serde(skip)]
+    pub uncertainty: Uncertainty,
+}
+
+/// Per-texel posterior standard deviations of a maps fit, row-major over its texel grid
+/// ([`texel_uncertainty`]; docs/maps.md, "Uncertainty").
+#[derive(Clone, Debug)]
+pub struct Uncertainty {
+    pub grid: TexelGrid,
+    /// The sd of `ln alpha_x`, `ln alpha_y` and `ln sqrt(alpha_x alpha_y)` (the layout of the
+    /// roughness map; one value thrice where isotropic): the relative sd of `alpha`, exact in the
+    /// coordinate the posterior is Gaussian in, so `alpha exp(+-2 sd)` is its 95% interval.
+    pub roughness: Vec<[f32; 3]>,
+    /// The sd of Schlick F0 per channel, from that of `logit F0` by the delta method (`F0 (1 -
+    /// F0)` times it); `None` with a known Fresnel.
+    pub specular: Option<Vec<[f32; 3]>>,
+    /// The sd of the diffuse albedo per channel, from that of `logit albedo` likewise.
+    pub diffuse: Vec<[f32; 3]>,
 }
 
 /// The prediction of a photo left out of a maps fit (`--holdout-photo`): the fit file's and
@@ -567,6 +586,21 @@ impl TexelModel<'_> {
         sigma2: f64,
         prior: &Prior,
     ) -> Linearised<N> {
+        self.linearise_scaled::<N, M>(x, pixels, sigma2, prior, |_| 1.0)
+    }
+
+    /// [`TexelModel::linearise`] with each residual's term of the matrix `w j j^T / sigma^2`
+    /// multiplied by `matrix_scale` of the residual's predicted value: with the noise variance
+    /// there over `sigma^2`, the matrix is the variance of the score, the middle of the sandwich
+    /// covariance ([`texel_uncertainty`]).
+    fn linearise_scaled<const N: usize, const M: usize>(
+        &self,
+        x: &[f64],
+        pixels: &[usize],
+        sigma2: f64,
+        prior: &Prior,
+        matrix_scale: impl Fn(f64) -> f64,
+    ) -> Linearised<N> {
         let diffuse_at = self.specular_dim();
         let slot = |i: usize| if i < diffuse_at { i } else { i - 3 };
         let coords: [DualSVec64<M>; N] = std::array::from_fn(|i| match i.checked_sub(diffuse_at) {
@@ -585,7 +619,9 @@ impl TexelModel<'_> {
             let scale = w / sigma2;
             for c in 0..3 {
                 let (l, dl) = lambert[c];
-                let r = specular[c].re + l * shading[c].re - self.records.target[p][c];
+                let predicted = specular[c].re + l * shading[c].re;
+                let r = predicted - self.records.target[p][c];
+                let in_matrix = matrix_scale(predicted);
                 let ds: [f64; M] = specular[c].eps.0.map_or([0.0; M], |d| d.into());
                 let dw: [f64; M] = shading[c].eps.0.map_or([0.0; M], |d| d.into());
                 let mut j = [0.0; N];
@@ -605,6 +641,7 @@ impl TexelModel<'_> {
                 for a in 0..N {
                     let ja = scale * j[a];
                     gradient[a] += ja * r;
+                    let ja = ja * in_matrix;
                     for b in 0..=a {
                         matrix[(a, b)] += ja * j[b];
                     }
@@ -721,13 +758,15 @@ impl TexelModel<'_> {
     }
 
     /// The cost of `pixels` at `x` under `prior`: `(cost, half gradient, half Gauss-Newton
-    /// matrix)`, the matrix row-major `dim x dim`.
+    /// matrix)`, the matrix row-major `dim x dim`, its residuals' terms scaled by
+    /// `matrix_scale` ([`TexelModel::linearise_scaled`]; `|_| 1.0` for the matrix itself).
     fn linearised_any(
         &self,
         x: &[f64],
         pixels: &[usize],
         sigma2: f64,
         prior: &Prior,
+        matrix_scale: &dyn Fn(f64) -> f64,
     ) -> (f64, Vec<f64>, Vec<f64>) {
         fn parts<const N: usize>(l: Linearised<N>) -> (f64, Vec<f64>, Vec<f64>) {
             let matrix = l.matrix.transpose();
@@ -738,13 +777,13 @@ impl TexelModel<'_> {
             )
         }
         match self.dim() {
-            4 => parts(self.linearise::<4, 1>(x, pixels, sigma2, prior)),
-            5 => parts(self.linearise::<5, 2>(x, pixels, sigma2, prior)),
-            6 => parts(self.linearise::<6, 3>(x, pixels, sigma2, prior)),
-            7 => parts(self.linearise::<7, 4>(x, pixels, sigma2, prior)),
-            8 => parts(self.linearise::<8, 5>(x, pixels, sigma2, prior)),
-            9 => parts(self.linearise::<9, 6>(x, pixels, sigma2, prior)),
-            10 => parts(self.linearise::<10, 7>(x, pixels, sigma2, prior)),
+            4 => parts(self.linearise_scaled::<4, 1>(x, pixels, sigma2, prior, matrix_scale)),
+            5 => parts(self.linearise_scaled::<5, 2>(x, pixels, sigma2, prior, matrix_scale)),
+            6 => parts(self.linearise_scaled::<6, 3>(x, pixels, sigma2, prior, matrix_scale)),
+            7 => parts(self.linearise_scaled::<7, 4>(x, pixels, sigma2, prior, matrix_scale)),
+            8 => parts(self.linearise_scaled::<8, 5>(x, pixels, sigma2, prior, matrix_scale)),
+            9 => parts(self.linearise_scaled::<9, 6>(x, pixels, sigma2, prior, matrix_scale)),
+            10 => parts(self.linearise_scaled::<10, 7>(x, pixels, sigma2, prior, matrix_scale)),
             n => unreachable!("a maps fit has 4 to 10 coordinates, not {n}"),
         }
     }
@@ -939,11 +978,12 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         lobe_directions: None,
     };
     let blocks = TexelBlocks::new(records, options.grid, 1, options.held_out_photo.as_slice());
-    let train_error = relative_error(
-        &maps_prediction(&model, &level.texels, None, options.grid, &blocks.pixels),
-        records,
-        &blocks.pixels,
-    );
+    let predicted = maps_prediction(&model, &level.texels, None, options.grid, &blocks.pixels);
+    let train_error = relative_error(&predicted, records, &blocks.pixels);
+    let seen = blocks.seen().len();
+    let noise = NoiseLevels::measure(records, &blocks.pixels, &predicted, seen * model.dim());
+    drop(predicted);
+    let uncertainty = texel_uncertainty(&model, &blocks, &level, &noise);
     Ok(MapsFit {
         maps: to_maps(&model, options, &level.texels),
         bases: floored_bases(level.bases, level.roughness_floor),
@@ -959,6 +999,7 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
             .count(),
         seconds: start.elapsed().as_secs_f64(),
         labels: level.labels,
+        uncertainty,
     })
 }
 
@@ -1560,7 +1601,7 @@ fn pooled_centre(
         own_coupling: DMatrix<f64>,
     }
     let reduce = |x: &[f64], t: usize| -> Option<Reduced> {
-        let (cost, g, m) = model.linearised_any(x, blocks.of(t), sigma2, &prior);
+        let (cost, g, m) = model.linearised_any(x, blocks.of(t), sigma2, &prior, &|_| 1.0);
         let m = DMatrix::from_row_slice(dim, dim, &m);
         let g = DVector::from_vec(g);
         let factor = m.view((s, s), (own, own)).into_owned().cholesky()?;
@@ -2301,6 +2342,167 @@ fn fill_unseen(texels: &mut [TexelFit], blocks: &TexelBlocks) {
                 .expect("some texel is seen");
             texels[t].x = texels[nearest].x.clone();
         }
+    }
+}
+
+/// The photos' noise variance as a function of the radiance, measured from a fit's residuals:
+/// the noise level function of Liu, Szeliski, Kang, Zitnick & Freeman 2008 ("Automatic
+/// estimation and removal of noise from a single image", PAMI 30(2), section 3), per bin of
+/// predicted radiance. A camera's noise grows with the signal (photon shot noise), and
+/// `synth --noise` is relative; the one noise level the texels are solved under (stage 2) is an
+/// average over the sample, too high for a dark texel's pixels and too low for a highlight's.
+struct NoiseLevels {
+    /// `(mean predicted radiance, noise variance)` per bin, by increasing radiance.
+    bins: Vec<(f64, f64)>,
+}
+
+/// The noise level function's bins: half a stop of predicted radiance each, below the
+/// brightest prediction, down to [`NOISE_BINS`] of them (the last takes everything darker);
+/// a bin holds at least [`NOISE_BIN_RESIDUALS`] residuals, or its residuals join the next
+/// darker bin.
+const NOISE_BINS: usize = 40;
+const NOISE_BIN_RESIDUALS: usize = 64;
+
+impl NoiseLevels {
+    /// The bins of the weighted squared residuals of `predicted` (the values of `pixels`), each
+    /// mean scaled by `residuals / (residuals - parameters)` as stage 2 scales its one level.
+    fn measure(
+        records: &ShadingRecords,
+        pixels: &[usize],
+        predicted: &[[f64; 3]],
+        parameters: usize,
+    ) -> NoiseLevels {
+        let brightest = predicted.iter().flatten().fold(0.0f64, |m, &v| m.max(v));
+        // Per bin: count, sum of predictions, sum of weighted squared residuals.
+        let mut sums = vec![(0usize, 0.0, 0.0); NOISE_BINS];
+        for (value, &p) in predicted.iter().zip(pixels) {
+            for (v, t) in value.iter().zip(records.target[p]) {
+                let stops = 2.0 * (brightest / v).log2();
+                let bin = if stops.is_finite() {
+                    stops as usize
+                } else {
+                    NOISE_BINS
+                };
+                let sum = &mut sums[bin.min(NOISE_BINS - 1)];
+                *sum = (
+                    sum.0 + 1,
+                    sum.1 + v,
+                    sum.2 + records.weight[p] * (v - t).powi(2),
+                );
+            }
+        }
+        let residuals = 3 * pixels.len();
+        let dof = residuals as f64 / residuals.saturating_sub(parameters).max(1) as f64;
+        let mut merged: Vec<(usize, f64, f64)> = Vec::new();
+        let mut pending = (0usize, 0.0, 0.0);
+        for (count, value, squares) in sums {
+            pending = (pending.0 + count, pending.1 + value, pending.2 + squares);
+            if pending.0 >= NOISE_BIN_RESIDUALS {
+                merged.push(std::mem::take(&mut pending));
+            }
+        }
+        // The darkest few residuals join the darkest full bin.
+        match merged.last_mut() {
+            Some(last) => *last = (last.0 + pending.0, last.1 + pending.1, last.2 + pending.2),
+            None if pending.0 > 0 => merged.push(pending),
+            None => {}
+        }
+        let mut bins: Vec<(f64, f64)> = (merged.iter())
+            .map(|&(count, value, squares)| (value / count as f64, dof * squares / count as f64))
+            .collect();
+        bins.reverse();
+        NoiseLevels { bins }
+    }
+
+    /// The noise variance at predicted radiance `value`: linear between the bins' means, the
+    /// end bins' beyond them; `fallback` without bins.
+    fn variance(&self, value: f64, fallback: f64) -> f64 {
+        let after = self.bins.partition_point(|&(v, _)| v < value);
+        match (after.checked_sub(1), self.bins.get(after)) {
+            (Some(i), Some(&(v1, s1))) => {
+                let (v0, s0) = self.bins[i];
+                s0 + (s1 - s0) * (value - v0) / (v1 - v0)
+            }
+            (Some(i), None) => self.bins[i].1,
+            (None, Some(&(_, s))) => s,
+            (None, None) => fallback,
+        }
+    }
+}
+
+/// Every texel's posterior standard deviations by the Laplace approximation (Bishop 2006,
+/// *Pattern Recognition and Machine Learning*, section 4.4) with the photos' noise as
+/// [`NoiseLevels`] measures it. A texel's value `x` minimises its negative log posterior,
+/// whose Hessian is half the Gauss-Newton matrix [`TexelModel::linearise`] forms, `H = J^T W J
+/// / sigma^2 + P` (Nocedal & Wright 2006, *Numerical Optimization*, section 10.3: `J^T J` in
+/// place of the Hessian of a least-squares term), with `sigma^2` the noise level the texel was
+/// solved under and `P` the precision of its prior under its basis (stage 4's; a texel of the
+/// basis's other kind takes only the basis's roughness). Linearised, `x - x_true = H^-1 (J^T W
+/// e / sigma^2 + P (c - x_true))` for noise `e` and prior centre `c`, whose covariance is the
+/// sandwich `H^-1 B H^-1` (White 1980, "A heteroskedasticity-consistent covariance matrix
+/// estimator", Econometrica 48(4)) with `B = J^T W S W J / sigma^4 + P`, `S` the noise
+/// variance of each residual, a truth drawn from the prior contributing `P`. Where the noise
+/// is `sigma^2` throughout, `B = H` and this is `H^-1`, the Laplace covariance itself; with the
+/// one `sigma^2`, the sd of the bright metals of docs/maps.md's truths came out half their
+/// errors, and a dark rubber's eight times them.
+///
+/// Evaluated once more per texel at the values in the maps, the roughness floor laid, rather
+/// than kept from the solves: a few floats a texel, not a matrix. A texel no pixel sees has
+/// its prior's sd. Not included: the choice of the bases, of the noise level and of the floor,
+/// and errors of the capture's geometry.
+fn texel_uncertainty(
+    model: &TexelModel,
+    blocks: &TexelBlocks,
+    level: &Level,
+    noise: &NoiseLevels,
+) -> Uncertainty {
+    let (dim, roughness, specular) = (model.dim(), model.roughness_dim(), model.specular_dim());
+    let fresnel = specular > roughness;
+    let sigma2 = level.sigma2;
+    let sds: Vec<[[f32; 3]; 3]> = (level.texels.par_iter().enumerate())
+        .map(|(t, texel)| {
+            let b = level.labels[t];
+            let prior = model.basis_prior(texel.kind, level.kinds[b], &level.prior_centres[b]);
+            let matrix = |scale: &dyn Fn(f64) -> f64| {
+                let (_, _, m) = model.linearised_any(&texel.x, blocks.of(t), sigma2, &prior, scale);
+                nalgebra::DMatrix::from_row_slice(dim, dim, &m)
+            };
+            let inverse = matrix(&|_| 1.0)
+                .cholesky()
+                .expect("the prior's precision makes the Gauss-Newton matrix positive definite")
+                .inverse();
+            let score = matrix(&|value| noise.variance(value, sigma2) / sigma2);
+            let covariance = &inverse * score * &inverse;
+            // The delta method: the sd of `sigmoid(x)` is `sigmoid'(x) sd(x)`.
+            let bounded = |first: usize| {
+                [0, 1, 2].map(|c| {
+                    let (x, v) = (texel.x[first + c], covariance[(first + c, first + c)]);
+                    let p = sigmoid(x);
+                    (p * (1.0 - p) * v.sqrt()) as f32
+                })
+            };
+            let alpha = if roughness == 2 {
+                let mean = 0.25 * (covariance.view((0, 0), (2, 2)).sum());
+                [covariance[(0, 0)], covariance[(1, 1)], mean]
+            } else {
+                [covariance[(0, 0)]; 3]
+            };
+            [
+                alpha.map(|v| v.sqrt() as f32),
+                if fresnel {
+                    bounded(roughness)
+                } else {
+                    [0.0; 3]
+                },
+                bounded(specular),
+            ]
+        })
+        .collect();
+    Uncertainty {
+        grid: blocks.grid,
+        roughness: sds.iter().map(|s| s[0]).collect(),
+        specular: fresnel.then(|| sds.iter().map(|s| s[1]).collect()),
+        diffuse: sds.iter().map(|s| s[2]).collect(),
     }
 }
 

@@ -6,7 +6,7 @@
 
 use super::fit::{fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions, Normals};
 use super::render::render_maps;
-use super::TexelGrid;
+use super::{MaterialMaps, TexelGrid};
 use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
@@ -217,6 +217,29 @@ impl MapsSet {
             predicted,
             holdout,
         })
+    }
+
+    /// Writes the images of `run`'s fit file `path` into `folder` (the maps folder beside it,
+    /// [`MaterialMaps::folder_beside`], or where that is staged): the maps and their
+    /// uncertainty. Returns the fit file's `maps` object and its other fields
+    /// ([`MapsSet::fit_file_fields`] and `uncertainty`), naming the images as the fit file sees
+    /// them.
+    pub fn write_fit_images(
+        &self,
+        run: &MapsRun,
+        path: &Path,
+        folder: &Path,
+    ) -> Result<(
+        serde_json::Value,
+        serde_json::Map<String, serde_json::Value>,
+    )> {
+        let beside = MaterialMaps::folder_beside(path);
+        let prefix = beside.file_name().unwrap_or_default().to_string_lossy();
+        let maps = run.fit.maps.write_images(folder, &prefix)?;
+        let mut fields = self.fit_file_fields(run);
+        let uncertainty = run.fit.uncertainty.write_images(folder, &prefix)?;
+        fields.insert("uncertainty".into(), uncertainty);
+        Ok((maps, fields))
     }
 
     /// The fields a maps fit file adds to the material (`maps_fit`, `texels`, `holdout`,
