@@ -10,36 +10,9 @@ use super::output::StagedFolder;
 use crate::capture::image_io::display_exposure;
 use crate::capture::Capture;
 use crate::error::Result;
-use crate::fit::fit_file::{FitFile, RegionReport};
+use crate::fit::fit_file::FitFile;
 use crate::fit::pipeline::{self, PipelineOptions, UniformRun};
-use crate::fit::ModelFit;
 use std::path::Path;
-
-/// One line for stderr on a finished fit.
-fn print_fit(fit: &ModelFit) {
-    // A corrected stochastic fit also says how far its walks' noise leaves alpha.
-    let noise = fit
-        .correction
-        .as_ref()
-        .and_then(|c| c.alpha_noise)
-        .map_or(String::new(), |n| {
-            format!(" (walks' noise {:.2}%)", 100.0 * n[0].max(n[1]))
-        });
-    eprintln!(
-        "{}: loss {:.6e}, alpha {:.5} {:.5}{}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})",
-        fit.material.model,
-        fit.loss,
-        fit.material.alpha[0],
-        fit.material.alpha[1],
-        noise,
-        fit.f0[0],
-        fit.f0[1],
-        fit.f0[2],
-        fit.evaluations,
-        fit.seconds,
-        fit.termination
-    );
-}
 
 /// The uniform fit of the photo set at `capture_path` ([`pipeline::run`]), printing the
 /// warnings about its photos, a line per finished fit (unless `quiet`) and, when the sampler
@@ -52,7 +25,7 @@ pub fn fit_photo_set(
 ) -> Result<Option<UniformRun>> {
     let done = pipeline::run(capture_path, capture, options, &print_warning, &|fit| {
         if !quiet {
-            print_fit(fit);
+            eprintln!("{}", fit.summary());
         }
     })?;
     if done.is_none() {
@@ -90,35 +63,14 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
     if !args.quiet && fits.len() > 1 {
         eprintln!("{}", selection.verdict);
     }
-    // With a posterior the fit file reports the most probable model, else BIC's choice.
-    let best = match &done.posterior {
-        Some(run) => run.most_probable,
-        None => fits
-            .iter()
-            .position(|f| f.material.model == selection.preferred)
-            .expect("the preferred model is one of the fits"),
-    };
-    // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure),
-    // from the render the fit's loss measured.
-    let predicted = &done.measured[best].prediction;
-    let region = done
-        .region
-        .as_ref()
-        .map(|applied| RegionReport::new(applied, records, predicted));
-    if let (Some(region), false) = (&region, args.quiet) {
+    let file = FitFile::of_run(&done, (&args.capture, &capture), &options);
+    if let (Some(region), false) = (file.region(), args.quiet) {
         eprintln!("{}", region.summary());
     }
-    let file = FitFile::new(
-        fits,
-        best,
-        selection,
-        done.posterior.as_ref().map(|r| &r.posterior),
-        (&args.capture, &capture),
-        records,
-        &options,
-    )
-    .with_region(region);
-    let residual = records.residuals(predicted.clone());
+    // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure),
+    // from the render the fit's loss measured.
+    let predicted = done.prediction();
+    let residual = records.residuals(predicted.to_vec());
     let exposure = display_exposure(&records.target);
     write_photo_images(&residual_folder.path(""), records, &residual, exposure, "")?;
     file.write(&output)?;

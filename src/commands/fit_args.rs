@@ -54,12 +54,16 @@ pub struct FitArgs {
 impl FitArgs {
     /// The fit file `-o` names, or `fits/<capture name>.json`, checked against overwriting.
     pub fn output_path(&self, capture: &Capture) -> Result<PathBuf> {
-        let output = self
-            .output
-            .clone()
-            .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)));
+        let output = self.output_or_default(capture);
         check_overwrite(&output, self.force)?;
         Ok(output)
+    }
+
+    /// The fit file `-o` names, or `fits/<capture name>.json`.
+    pub fn output_or_default(&self, capture: &Capture) -> PathBuf {
+        self.output
+            .clone()
+            .unwrap_or_else(|| Path::new("fits").join(format!("{}.json", capture.name)))
     }
 }
 

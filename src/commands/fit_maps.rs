@@ -10,12 +10,14 @@ use super::images::write_photo_images;
 use super::inputs::print_warning;
 use super::output::StagedFolder;
 use crate::capture::image_io::display_exposure;
+use crate::bsdf::Model;
 use crate::error::{Error, Result};
 use crate::maps::fit::{HeldOutPhoto, MapsFit};
 use crate::maps::pipeline::MapsSet;
 use crate::maps::MaterialMaps;
 
-pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
+/// The one model a maps fit with `args` fits, refusing several models and `--mcmc`.
+pub fn maps_model(args: &FitArgs) -> Result<Model> {
     let [model] = args.models.as_slice() else {
         return Err(Error::argument(
             "--models",
@@ -29,15 +31,20 @@ pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
              fits (drop --maps, or --mcmc)",
         ));
     }
+    Ok(*model)
+}
+
+pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
+    let model = maps_model(args)?;
     let capture = args.options.real.open(&args.capture)?;
     let output = args.output_path(&capture)?;
     let maps_folder = StagedFolder::new(&MaterialMaps::folder_beside(&output), args.force)?;
     let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
     let options = args
         .options
-        .maps_options(*model, &args.map_options, !args.quiet);
+        .maps_options(model, &args.map_options, !args.quiet);
     let set = MapsSet::new(&args.capture, capture, options, &print_warning)?;
-    let mut run = set.fit(*model)?;
+    let mut run = set.fit(model)?;
     if !args.quiet {
         summarise(&run.fit, run.holdout.as_ref());
     }

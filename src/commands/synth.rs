@@ -6,10 +6,8 @@ use super::inputs::{load_any_material, open_capture};
 use super::output::StagedFolder;
 use crate::capture::image_io::display_exposure;
 use crate::capture::image_io::ColorEncoding;
-use crate::capture::Capture;
 use crate::error::{Error, Result};
-use crate::fit::point::exposure::exposed_records;
-use crate::maps::render::render_any;
+use crate::maps::render::{check_fits_capture, render_any, render_records};
 use crate::maps::AnyMaterial;
 use crate::random::rng_stream;
 use crate::shading::ShadingRecords;
@@ -92,7 +90,7 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
     }
     let material = load_any_material(&args.material)?;
     let capture = open_capture(&args.capture)?;
-    check_maps_fit(&material, &args.material, &capture)?;
+    check_fits_capture(&material, &args.material, &capture)?;
     let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
     let folder = StagedFolder::new(&args.output, args.force)?;
     let mut pixels = render_any(&material, &records, args.seed)?;
@@ -202,33 +200,13 @@ fn write_phone_jpegs(
     Ok(())
 }
 
-/// The exposure a fit file records (`fit --fit-exposure`), 1 for a material file.
-fn fitted_exposure(path: &std::path::Path) -> f64 {
-    std::fs::read_to_string(path)
-        .ok()
-        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
-        .and_then(|value| value.get("exposure")?.get("value")?.as_f64())
-        .filter(|s| s.is_finite() && *s > 0.0)
-        .unwrap_or(1.0)
-}
-
-/// Refuses maps whose texels are not square on the capture's sample.
-fn check_maps_fit(material: &AnyMaterial, path: &std::path::Path, capture: &Capture) -> Result<()> {
-    match material {
-        AnyMaterial::Maps(maps) => maps.check_sample(path, &capture.sample),
-        AnyMaterial::Uniform(_) => Ok(()),
-    }
-}
-
 pub fn run_render(args: &RenderArgs) -> Result<()> {
     let material = load_any_material(&args.material)?;
     let mut capture = open_capture(&args.capture)?;
     if let Some(depth) = args.depth {
         capture.depth = depth;
     }
-    check_maps_fit(&material, &args.material, &capture)?;
-    let records = ShadingRecords::build(&capture, args.pixel_samples, false)?;
-    let records = exposed_records(&records, fitted_exposure(&args.material));
+    let records = render_records(&material, &args.material, &capture, args.pixel_samples)?;
     let folder = StagedFolder::new(&args.output, args.force)?;
     let pixels = render_any(&material, &records, args.seed)?;
     write_photo_images(

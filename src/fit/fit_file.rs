@@ -4,7 +4,7 @@
 
 use super::bayes::posterior::Posterior;
 use super::bayes::selection::Selection;
-use super::pipeline::PipelineOptions;
+use super::pipeline::{PipelineOptions, UniformRun};
 use super::point::uniformity::{self, Uniformity};
 use super::{edge_tint, ModelFit};
 use crate::bsdf::Model;
@@ -142,6 +142,41 @@ impl<'a> FitFile<'a> {
         }
     }
 
+    /// The fit file `fit` writes for `run`, a run of `options` on `capture`: the most probable
+    /// model's fit with a posterior, else BIC's choice, with the region report of that fit's
+    /// prediction when the fit was restricted to a region.
+    pub fn of_run(
+        run: &'a UniformRun,
+        capture: (&Path, &'a Capture),
+        options: &PipelineOptions,
+    ) -> FitFile<'a> {
+        let chosen = run.chosen();
+        let region = run
+            .region
+            .as_ref()
+            .map(|applied| RegionReport::new(applied, &run.records, run.prediction()));
+        FitFile::new(
+            &run.fits,
+            chosen,
+            &run.selection,
+            run.posterior.as_ref().map(|r| &r.posterior),
+            capture,
+            &run.records,
+            options,
+        )
+        .with_region(region)
+    }
+
+    /// The `region` entry, if the fit was restricted to one.
+    pub fn region(&self) -> Option<&RegionReport> {
+        self.region.as_ref()
+    }
+
+    /// The file's JSON text, as [`FitFile::write`] writes it.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("a fit file serialises")
+    }
+
     /// The same file with a `region` entry.
     pub fn with_region(mut self, region: Option<RegionReport>) -> Self {
         self.region = region;
@@ -150,8 +185,9 @@ impl<'a> FitFile<'a> {
 
     /// Write the file as pretty JSON, atomically.
     pub fn write(&self, path: &Path) -> Result<()> {
+        let text = self.to_json();
         crate::capture::atomic_file::write_atomically(path, |w| {
-            serde_json::to_writer_pretty(&mut *w, self).map_err(|e| Error::io(path, e))
+            std::io::Write::write_all(w, text.as_bytes()).map_err(|e| Error::io(path, e))
         })
     }
 }

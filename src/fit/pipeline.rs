@@ -170,6 +170,24 @@ pub fn run(
 }
 
 impl UniformRun {
+    /// The fit the fit file reports: with a posterior the most probable model, else BIC's
+    /// choice.
+    pub fn chosen(&self) -> usize {
+        match &self.posterior {
+            Some(run) => run.most_probable,
+            None => self
+                .fits
+                .iter()
+                .position(|f| f.material.model == self.selection.preferred)
+                .expect("the preferred model is one of the fits"),
+        }
+    }
+
+    /// The chosen fit's render of the records, the one its loss measured.
+    pub fn prediction(&self) -> &[[f64; 3]] {
+        &self.measured[self.chosen()].prediction
+    }
+
     /// Removes the sampler's checkpoint once the outputs it led to are written.
     pub fn remove_checkpoint(&self) -> Result<()> {
         if let (Some(_), Some(checkpoint)) = (&self.posterior, &self.checkpoint) {

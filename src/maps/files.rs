@@ -292,17 +292,23 @@ impl MaterialMaps {
         maps: Value,
         extra: serde_json::Map<String, Value>,
     ) -> Result<()> {
+        let document = self.document(maps, extra);
+        write_atomically(path, |w| {
+            serde_json::to_writer_pretty(&mut *w, &document).map_err(|e| Error::io(path, e))
+        })
+    }
+
+    /// The material file [`MaterialMaps::save_json`] writes: the base material, `extra`, and
+    /// `maps` (the object [`MaterialMaps::write_images`] returns).
+    pub fn document(&self, maps: Value, extra: serde_json::Map<String, Value>) -> Value {
         let Value::Object(mut fields) =
-            serde_json::to_value(&self.base).map_err(|e| Error::io(path, e))?
+            serde_json::to_value(&self.base).expect("a material serialises")
         else {
             unreachable!("a material serialises to an object")
         };
         fields.extend(extra);
         fields.insert("maps".into(), maps);
-        write_atomically(path, |w| {
-            serde_json::to_writer_pretty(&mut *w, &Value::Object(fields))
-                .map_err(|e| Error::io(path, e))
-        })
+        Value::Object(fields)
     }
 
     /// Writes the maps this material has into `folder` (which must exist) and returns the

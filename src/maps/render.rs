@@ -5,10 +5,13 @@
 
 use super::lobe::TexelLobe;
 use super::{AnyMaterial, MaterialMaps};
+use crate::capture::Capture;
 use crate::error::{Error, Result};
+use crate::fit::point::exposure::exposed_records;
 use crate::render::{accumulate, render_pixels};
 use crate::scalar::{Rgb, Vec3};
 use crate::shading::ShadingRecords;
+use std::path::Path;
 
 /// Predicted radiance of `pixels` for `maps`. Needs records built from a capture (with texture
 /// coordinates).
@@ -49,6 +52,37 @@ pub fn render_any(
         AnyMaterial::Uniform(material) => Ok(render_pixels(material, records, &all, seed)),
         AnyMaterial::Maps(maps) => render_maps(maps, records, &all, seed),
     }
+}
+
+/// Refuses maps (read from `path`) whose texels are not square on the capture's sample.
+pub fn check_fits_capture(material: &AnyMaterial, path: &Path, capture: &Capture) -> Result<()> {
+    match material {
+        AnyMaterial::Maps(maps) => maps.check_sample(path, &capture.sample),
+        AnyMaterial::Uniform(_) => Ok(()),
+    }
+}
+
+/// The records `render` renders `material` (read from `path`: a fit file's fitted `exposure`
+/// applied) over for every photo of `capture`, with `pixel_samples` sub-samples per pixel.
+pub fn render_records(
+    material: &AnyMaterial,
+    path: &Path,
+    capture: &Capture,
+    pixel_samples: usize,
+) -> Result<ShadingRecords> {
+    check_fits_capture(material, path, capture)?;
+    let records = ShadingRecords::build(capture, pixel_samples, false)?;
+    Ok(exposed_records(&records, fitted_exposure(path)).into_owned())
+}
+
+/// The `exposure` a fit file at `path` fitted, 1 for a material file or without one.
+fn fitted_exposure(path: &Path) -> f64 {
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        .and_then(|value| value.get("exposure")?.get("value")?.as_f64())
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .unwrap_or(1.0)
 }
 
 #[cfg(test)]

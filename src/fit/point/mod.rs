@@ -206,6 +206,32 @@ pub struct ModelFit {
 }
 
 impl ModelFit {
+    /// One line on the finished fit, as `fit` prints it: loss, alpha (with a corrected
+    /// stochastic fit, how far its walks' noise leaves alpha), F0, evaluations and time.
+    pub fn summary(&self) -> String {
+        let noise = self
+            .correction
+            .as_ref()
+            .and_then(|c| c.alpha_noise)
+            .map_or(String::new(), |n| {
+                format!(" (walks' noise {:.2}%)", 100.0 * n[0].max(n[1]))
+            });
+        format!(
+            "{}: loss {:.6e}, alpha {:.5} {:.5}{}, F0 {:.4} {:.4} {:.4}, {} evaluations, {:.2} s ({})",
+            self.material.model,
+            self.loss,
+            self.material.alpha[0],
+            self.material.alpha[1],
+            noise,
+            self.f0[0],
+            self.f0[1],
+            self.f0[2],
+            self.evaluations,
+            self.seconds,
+            self.termination
+        )
+    }
+
     /// The fitted exposure, 1 when none was fitted.
     pub fn exposure_value(&self) -> f64 {
         self.exposure.map_or(1.0, |e| e.value)
