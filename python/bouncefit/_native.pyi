@@ -1,0 +1,20 @@
+"""Type hints of the compiled module (python/src/lib.rs); use the ``bouncefit`` package."""
+
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+VERSION: str
+
+class FitOutput:
+    def save(self, path: str) -> None: ...
+
+def load_photo_set(path: str, depth: Optional[float] = None) -> dict[str, Any]: ...
+def fit(
+    path: str, argv: list[str], progress: Optional[Callable[[str, str], None]] = None
+) -> Optional[dict[str, Any]]: ...
+def render(
+    capture: str, material: str, pixel_samples: int = 4, seed: int = 0, depth: Optional[float] = None
+) -> list[np.ndarray]: ...
+def compare(argv: list[str]) -> None: ...
+def export(argv: list[str]) -> None: ...

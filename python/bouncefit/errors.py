@@ -1,0 +1,14 @@
+"""The exceptions bouncefit raises. Their message is the one the command line prints after
+``error:`` (naming the file and field at fault)."""
+
+
+class BouncefitError(Exception):
+    """Any error bouncefit reports."""
+
+
+class InvalidInputError(BouncefitError, ValueError):
+    """Bad input: a wrong option, or a file whose content is wrong (its field is named)."""
+
+
+class FileError(BouncefitError, OSError):
+    """A file could not be read or written (missing, unreadable, not writable)."""

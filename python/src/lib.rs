@@ -1,0 +1,382 @@
+//! `bouncefit._native`: the Python package's bindings (PyO3). Every function here parses its
+//! options with the command line's own argument types (`bouncefit::commands`) and calls the
+//! library pipeline the command calls; the pure-Python `bouncefit` package wraps the results in
+//! plain objects. Long work runs with the GIL released.
+
+use bouncefit::capture::atomic_file::write_atomically;
+use bouncefit::capture::Capture;
+use bouncefit::commands::compare::{run_compare, CompareArgs};
+use bouncefit::commands::export::{run_export, ExportArgs};
+use bouncefit::commands::fit_args::{FitArgs, RealCaptureArgs};
+use bouncefit::commands::fit_maps::maps_model;
+use bouncefit::commands::inputs::load_any_material;
+use bouncefit::error::Error;
+use bouncefit::fit::fit_file::FitFile;
+use bouncefit::fit::pipeline;
+use bouncefit::maps::pipeline::MapsSet;
+use bouncefit::maps::render::{render_any, render_records};
+use bouncefit::maps::MaterialMaps;
+use bouncefit::shading::ShadingRecords;
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// A library error as the exception of `bouncefit.errors` its kind maps to, with the message
+/// the command line prints after `error: `.
+fn py_error(err: Error) -> PyErr {
+    let class = match err {
+        Error::Io { .. } => "FileError",
+        Error::Invalid { .. } | Error::Argument { .. } => "InvalidInputError",
+    };
+    raise(class, err.to_string())
+}
+
+fn raise(class: &str, message: String) -> PyErr {
+    Python::attach(|py| {
+        match py
+            .import("bouncefit.errors")
+            .and_then(|m| m.getattr(class))
+        {
+            Ok(exception) => PyErr::from_value(
+                exception
+                    .call1((message,))
+                    .unwrap_or_else(|e| e.into_value(py).into_bound(py).into_any()),
+            ),
+            Err(e) => e,
+        }
+    })
+}
+
+/// Parses `argv` (the words after `bouncefit COMMAND`) into `T` exactly as the command line
+/// does; a bad option raises `InvalidInputError` with clap's message.
+fn parse<T: clap::Args + clap::FromArgMatches>(command: &str, argv: Vec<String>) -> PyResult<T> {
+    let matches = T::augment_args(clap::Command::new("bouncefit"))
+        .bin_name(format!("bouncefit {command}"))
+        .try_get_matches_from(std::iter::once("bouncefit".to_string()).chain(argv))
+        .map_err(clap_error)?;
+    T::from_arg_matches(&matches).map_err(clap_error)
+}
+
+/// clap's first paragraph without its `error: ` prefix (the usage lines are for a terminal).
+fn clap_error(err: clap::Error) -> PyErr {
+    let text = err.render().to_string();
+    let first = text.split("\n\n").next().unwrap_or_default().trim();
+    let message = first.strip_prefix("error: ").unwrap_or(first).to_string();
+    raise("InvalidInputError", message)
+}
+
+/// Calls the Python progress callback `(stage, message)`; the first exception it raises is
+/// kept and raised when the work is done (the pipeline cannot be stopped half-way).
+struct Callback {
+    function: Option<Py<PyAny>>,
+    failure: Mutex<Option<PyErr>>,
+}
+
+impl Callback {
+    fn new(function: Option<Py<PyAny>>) -> Self {
+        Callback {
+            function,
+            failure: Mutex::new(None),
+        }
+    }
+
+    fn call(&self, stage: &str, message: &str) {
+        let Some(function) = &self.function else {
+            return;
+        };
+        Python::attach(|py| {
+            if let Err(err) = function.call1(py, (stage, message)) {
+                self.failure
+                    .lock()
+                    .expect("no panic holds the lock")
+                    .get_or_insert(err);
+            }
+        });
+    }
+
+    fn finish(self) -> PyResult<()> {
+        match self.failure.into_inner().expect("no panic holds the lock") {
+            Some(err) => Err(err),
+            None => Ok(()),
+        }
+    }
+}
+
+/// One `(height, width, 3)` array per photo of `records` from per-pixel values.
+fn photo_arrays<'py>(
+    py: Python<'py>,
+    records: &ShadingRecords,
+    per_pixel: &[[f64; 3]],
+) -> PyResult<Bound<'py, PyList>> {
+    let arrays = records
+        .photos
+        .iter()
+        .map(|photo| {
+            let n = photo.width * photo.height;
+            let flat: Vec<f64> = per_pixel[photo.first_pixel..photo.first_pixel + n]
+                .iter()
+                .flatten()
+                .copied()
+                .collect();
+            PyArray1::from_vec(py, flat).reshape([photo.height, photo.width, 3])
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    PyList::new(py, arrays)
+}
+
+/// A `(height, width, channels)` array of a texel map.
+fn map_array<'py, const C: usize>(
+    py: Python<'py>,
+    maps: &MaterialMaps,
+    texels: &[[f64; C]],
+) -> PyResult<Bound<'py, PyAny>> {
+    let flat: Vec<f64> = texels.iter().flatten().copied().collect();
+    Ok(PyArray1::from_vec(py, flat)
+        .reshape([maps.grid.height, maps.grid.width, C])?
+        .into_any())
+}
+
+fn stems(records: &ShadingRecords) -> Vec<String> {
+    records.photos.iter().map(|p| p.stem.clone()).collect()
+}
+
+/// The capture at `path` with `--depth` applied, as `fit` opens it.
+fn open_capture(path: &Path, depth: Option<f64>) -> PyResult<Capture> {
+    let real = RealCaptureArgs {
+        fit_exposure: false,
+        fresnel_known: None,
+        depth,
+        region: None,
+        mask: None,
+    };
+    real.open(path).map_err(py_error)
+}
+
+/// A photo set: its name, photos and the linear images the fits see.
+#[pyfunction]
+#[pyo3(signature = (path, depth=None))]
+fn load_photo_set<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    depth: Option<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let capture = open_capture(&path, depth)?;
+    let records = py
+        .detach(|| ShadingRecords::build(&capture, 1, true))
+        .map_err(py_error)?;
+    let out = PyDict::new(py);
+    out.set_item("path", path)?;
+    out.set_item("name", &capture.name)?;
+    out.set_item("units", &capture.units)?;
+    out.set_item("sample", [capture.sample.width, capture.sample.height])?;
+    out.set_item("depth", capture.depth)?;
+    out.set_item("photos", stems(&records))?;
+    out.set_item("images", photo_arrays(py, &records, &records.target)?)?;
+    Ok(out)
+}
+
+/// What a fit leaves to be written: the uniform fit file's text, or maps and their fields.
+#[pyclass(frozen, module = "bouncefit._native")]
+struct FitOutput {
+    form: Form,
+}
+
+enum Form {
+    Text(String),
+    Maps(MaterialMaps, serde_json::Map<String, serde_json::Value>),
+}
+
+#[pymethods]
+impl FitOutput {
+    /// Writes the fit file at `path` as `bouncefit fit -o PATH` does (maps: their images into
+    /// `<PATH without .json>.maps/`), atomically; residual images are not written.
+    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        py.detach(|| match &self.form {
+            Form::Text(text) => write_atomically(&path, |w| {
+                std::io::Write::write_all(w, text.as_bytes()).map_err(|e| Error::io(&path, e))
+            }),
+            Form::Maps(maps, fields) => maps.save(&path, fields.clone()),
+        })
+        .map_err(py_error)
+    }
+}
+
+/// `bouncefit fit PATH ARGV...` without writing files: the fit file's JSON, the chosen fit's
+/// prediction and residual per photo, the maps of a maps fit, and a `FitOutput` to save it.
+/// `None` when an MCMC run stopped early and left its checkpoint.
+#[pyfunction]
+#[pyo3(signature = (path, argv, progress=None))]
+fn fit<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    argv: Vec<String>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let argv = std::iter::once(path.display().to_string()).chain(argv);
+    let args: FitArgs = parse("fit", argv.collect())?;
+    let callback = Callback::new(progress);
+    let out = if args.map_options.maps {
+        fit_maps(py, &args, &callback)?
+    } else {
+        fit_uniform(py, &args, &callback)?
+    };
+    callback.finish()?;
+    Ok(out)
+}
+
+/// The fit file `-o` names (refused over an existing file without `--force`, as `fit` does),
+/// else the command line's default, which only names an MCMC run's checkpoint.
+fn fit_file_path(args: &FitArgs, capture: &Capture) -> PyResult<PathBuf> {
+    match &args.output {
+        Some(_) => args.output_path(capture).map_err(py_error),
+        None => Ok(args.output_or_default(capture)),
+    }
+}
+
+fn fit_uniform<'py>(
+    py: Python<'py>,
+    args: &FitArgs,
+    callback: &Callback,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let capture = args.options.real.open(&args.capture).map_err(py_error)?;
+    let output = fit_file_path(args, &capture)?;
+    let options = args
+        .options
+        .pipeline_options(&args.models, &args.mcmc, &output, false, args.force);
+    let done = py
+        .detach(|| {
+            pipeline::run(
+                &args.capture,
+                &capture,
+                &options,
+                &|warning| callback.call("warning", warning),
+                &|fit| callback.call("fitted", &fit.summary()),
+            )
+        })
+        .map_err(py_error)?;
+    let Some(done) = done else {
+        return Ok(None);
+    };
+    let text = FitFile::of_run(&done, (&args.capture, &capture), &options).to_json();
+    let predicted = done.prediction();
+    let out = PyDict::new(py);
+    out.set_item("json", &text)?;
+    out.set_item("photos", stems(&done.records))?;
+    out.set_item("prediction", photo_arrays(py, &done.records, predicted)?)?;
+    let residual = done.records.residuals(predicted);
+    out.set_item("residuals", photo_arrays(py, &done.records, &residual)?)?;
+    out.set_item("maps", py.None())?;
+    let saved = FitOutput {
+        form: Form::Text(text),
+    };
+    if args.output.is_some() {
+        saved.save(py, output)?;
+    }
+    out.set_item("output", saved)?;
+    Ok(Some(out))
+}
+
+fn fit_maps<'py>(
+    py: Python<'py>,
+    args: &FitArgs,
+    callback: &Callback,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let model = maps_model(args).map_err(py_error)?;
+    let capture = args.options.real.open(&args.capture).map_err(py_error)?;
+    let output = fit_file_path(args, &capture)?;
+    let options = args.options.maps_options(model, &args.map_options, false);
+    let set = py
+        .detach(|| {
+            MapsSet::new(&args.capture, capture, options, &|warning| {
+                callback.call("warning", warning)
+            })
+        })
+        .map_err(py_error)?;
+    let texels = set.grid.width * set.grid.height;
+    callback.call("records", &format!("{texels} texels"));
+    let run = py.detach(|| set.fit(model)).map_err(py_error)?;
+    callback.call("fitted", &format!("maps of {model}"));
+    let fields = set.fit_file_fields(&run);
+    let (maps, records) = (&run.fit.maps, &*run.records);
+    let residual = records.residuals(&run.predicted);
+    let document = maps.document(serde_json::Value::Object(Default::default()), fields.clone());
+    let out = PyDict::new(py);
+    out.set_item("json", serde_json::to_string_pretty(&document).expect("JSON"))?;
+    out.set_item("photos", stems(records))?;
+    out.set_item("prediction", photo_arrays(py, records, &run.predicted)?)?;
+    out.set_item("residuals", photo_arrays(py, records, &residual)?)?;
+    let arrays = PyDict::new(py);
+    if let Some(texels) = &maps.diffuse {
+        arrays.set_item("diffuse", map_array(py, maps, texels)?)?;
+    }
+    if let Some(texels) = &maps.specular {
+        arrays.set_item("specular", map_array(py, maps, texels)?)?;
+    }
+    if let Some(texels) = &maps.roughness {
+        arrays.set_item("roughness", map_array(py, maps, texels)?)?;
+    }
+    if let Some(texels) = &maps.normal {
+        arrays.set_item("normal", map_array(py, maps, texels)?)?;
+    }
+    out.set_item("maps", arrays)?;
+    let saved = FitOutput {
+        form: Form::Maps(maps.clone(), fields),
+    };
+    if args.output.is_some() {
+        saved.save(py, output)?;
+    }
+    out.set_item("output", saved)?;
+    Ok(Some(out))
+}
+
+/// `bouncefit render --capture CAPTURE --material MATERIAL` without writing files: the linear
+/// render of every photo (a fit file's fitted exposure applied).
+#[pyfunction]
+#[pyo3(signature = (capture, material, pixel_samples=4, seed=0, depth=None))]
+fn render<'py>(
+    py: Python<'py>,
+    capture: PathBuf,
+    material: PathBuf,
+    pixel_samples: usize,
+    seed: u64,
+    depth: Option<f64>,
+) -> PyResult<Bound<'py, PyList>> {
+    let loaded = load_any_material(&material).map_err(py_error)?;
+    let opened = open_capture(&capture, depth)?;
+    let (records, pixels) = py
+        .detach(|| {
+            let records = render_records(&loaded, &material, &opened, pixel_samples)?;
+            let pixels = render_any(&loaded, &records, seed)?;
+            Ok::<_, Error>((records, pixels))
+        })
+        .map_err(py_error)?;
+    photo_arrays(py, &records, &pixels)
+}
+
+/// `bouncefit compare ARGV...` (writes the report folder).
+#[pyfunction]
+fn compare(py: Python<'_>, argv: Vec<String>) -> PyResult<()> {
+    let args: CompareArgs = parse("compare", argv)?;
+    py.detach(|| run_compare(&args)).map_err(py_error)
+}
+
+/// `bouncefit export ARGV...` (writes the exported file).
+#[pyfunction]
+fn export(py: Python<'_>, argv: Vec<String>) -> PyResult<()> {
+    let args: ExportArgs = parse("export", argv)?;
+    py.detach(|| run_export(&args)).map_err(py_error)
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(load_photo_set, m)?)?;
+    m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(export, m)?)?;
+    m.add_class::<FitOutput>()?;
+    m.add("VERSION", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
