@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The crosscheck suite: set up the venv, build the binary, run pytest.
+# The crosscheck suite: set up the venv, build the binary, run pytest; then the Python
+# package's tests (python/tests/run.sh).
 # Extra arguments go to pytest (e.g. `tests/crosscheck/run.sh -k brdf`).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -14,4 +15,6 @@ cargo test --no-run --quiet --manifest-path "$root/Cargo.toml"
 target="${CARGO_TARGET_DIR:-$root/target}"
 export BOUNCEFIT_BIN="${BOUNCEFIT_BIN:-$target/debug/bouncefit}"
 cd "$here"
-exec "$here/.venv/bin/python" -m pytest -q -rA "$@"
+"$here/.venv/bin/python" -m pytest -q -rA "$@"
+# The Python package (python/): built into its own venv and tested against this binary.
+exec "$root/python/tests/run.sh"

@@ -5,14 +5,7 @@
 # Idempotent: does nothing when all of them are already there.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
-venv="$here/.venv"
-stamp="$venv/requirements.installed"
-if ! { [ -f "$stamp" ] && cmp -s "$stamp" "$here/requirements.txt"; }; then
-    python3 -m venv "$venv"
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$here/requirements.txt"
-    cp "$here/requirements.txt" "$stamp"
-    echo "crosscheck: installed $(grep -c '==' "$here/requirements.txt") pinned packages into $venv"
-fi
+"$here/../../scripts/pinned-venv.sh" "$here/.venv" "$here/requirements.txt"
 
 # The Khronos glTF validator (npm gltf-validator, pinned in node/package-lock.json) for
 # test_export_maps.py; Node and npm come from the distribution where missing (root on CI).
