@@ -34,19 +34,16 @@ fn py_error(err: Error) -> PyErr {
 }
 
 fn raise(class: &str, message: String) -> PyErr {
-    Python::attach(|py| {
-        match py
-            .import("bouncefit.errors")
-            .and_then(|m| m.getattr(class))
-        {
+    Python::attach(
+        |py| match py.import("bouncefit.errors").and_then(|m| m.getattr(class)) {
             Ok(exception) => PyErr::from_value(
                 exception
                     .call1((message,))
                     .unwrap_or_else(|e| e.into_value(py).into_bound(py).into_any()),
             ),
             Err(e) => e,
-        }
-    })
+        },
+    )
 }
 
 /// Parses `argv` (the words after `bouncefit COMMAND`) into `T` exactly as the command line
@@ -242,9 +239,9 @@ fn fit_uniform<'py>(
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
     let capture = args.options.real.open(&args.capture).map_err(py_error)?;
     let output = fit_file_path(args, &capture)?;
-    let options = args
-        .options
-        .pipeline_options(&args.models, &args.mcmc, &output, false, args.force);
+    let options =
+        args.options
+            .pipeline_options(&args.models, &args.mcmc, &output, false, args.force);
     let done = py
         .detach(|| {
             pipeline::run(
@@ -301,9 +298,15 @@ fn fit_maps<'py>(
     let fields = set.fit_file_fields(&run);
     let (maps, records) = (&run.fit.maps, &*run.records);
     let residual = records.residuals(&run.predicted);
-    let document = maps.document(serde_json::Value::Object(Default::default()), fields.clone());
+    let document = maps.document(
+        serde_json::Value::Object(Default::default()),
+        fields.clone(),
+    );
     let out = PyDict::new(py);
-    out.set_item("json", serde_json::to_string_pretty(&document).expect("JSON"))?;
+    out.set_item(
+        "json",
+        serde_json::to_string_pretty(&document).expect("JSON"),
+    )?;
     out.set_item("photos", stems(records))?;
     out.set_item("prediction", photo_arrays(py, records, &run.predicted)?)?;
     out.set_item("residuals", photo_arrays(py, records, &residual)?)?;
