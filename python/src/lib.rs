@@ -33,17 +33,14 @@ fn py_error(err: Error) -> PyErr {
     raise(class, err.to_string())
 }
 
+/// The exception `class` of `bouncefit.errors` carrying `message` (or the error of making it).
 fn raise(class: &str, message: String) -> PyErr {
-    Python::attach(
-        |py| match py.import("bouncefit.errors").and_then(|m| m.getattr(class)) {
-            Ok(exception) => PyErr::from_value(
-                exception
-                    .call1((message,))
-                    .unwrap_or_else(|e| e.into_value(py).into_bound(py).into_any()),
-            ),
-            Err(e) => e,
-        },
-    )
+    Python::attach(|py| {
+        py.import("bouncefit.errors")
+            .and_then(|m| m.getattr(class))
+            .and_then(|exception| exception.call1((message,)))
+            .map_or_else(|e| e, PyErr::from_value)
+    })
 }
 
 /// Parses `argv` (the words after `bouncefit COMMAND`) into `T` exactly as the command line
