@@ -259,7 +259,7 @@ fn fit_uniform<'py>(
     out.set_item("json", &text)?;
     out.set_item("photos", stems(&done.records))?;
     out.set_item("prediction", photo_arrays(py, &done.records, predicted)?)?;
-    let residual = done.records.residuals(predicted);
+    let residual = done.records.residuals(predicted.to_vec());
     out.set_item("residuals", photo_arrays(py, &done.records, &residual)?)?;
     out.set_item("maps", py.None())?;
     let saved = FitOutput {
@@ -294,7 +294,7 @@ fn fit_maps<'py>(
     callback.call("fitted", &format!("maps of {model}"));
     let fields = set.fit_file_fields(&run);
     let (maps, records) = (&run.fit.maps, &*run.records);
-    let residual = records.residuals(&run.predicted);
+    let residual = records.residuals(run.predicted.clone());
     let document = maps.document(
         serde_json::Value::Object(Default::default()),
         fields.clone(),
