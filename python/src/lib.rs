@@ -13,7 +13,8 @@ use bouncefit::commands::inputs::load_any_material;
 use bouncefit::error::Error;
 use bouncefit::fit::fit_file::FitFile;
 use bouncefit::fit::pipeline;
-use bouncefit::maps::pipeline::MapsSet;
+use bouncefit::maps::fit::Uncertainty;
+use bouncefit::maps::pipeline::{write_fit_images, MapsSet};
 use bouncefit::maps::render::{render_any, render_records};
 use bouncefit::maps::MaterialMaps;
 use bouncefit::shading::ShadingRecords;
@@ -179,7 +180,11 @@ struct FitOutput {
 
 enum Form {
     Text(String),
-    Maps(MaterialMaps, serde_json::Map<String, serde_json::Value>),
+    Maps(
+        MaterialMaps,
+        Uncertainty,
+        serde_json::Map<String, serde_json::Value>,
+    ),
 }
 
 #[pymethods]
@@ -191,7 +196,13 @@ impl FitOutput {
             Form::Text(text) => write_atomically(&path, |w| {
                 std::io::Write::write_all(w, text.as_bytes()).map_err(|e| Error::io(&path, e))
             }),
-            Form::Maps(maps, fields) => maps.save(&path, fields.clone()),
+            Form::Maps(maps, uncertainty, fields) => {
+                let folder = MaterialMaps::folder_beside(&path);
+                std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
+                let (entry, fields) =
+                    write_fit_images(maps, uncertainty, &path, &folder, fields.clone())?;
+                maps.save_json(&path, entry, fields)
+            }
         })
         .map_err(py_error)
     }
@@ -295,10 +306,10 @@ fn fit_maps<'py>(
     let fields = set.fit_file_fields(&run);
     let (maps, records) = (&run.fit.maps, &*run.records);
     let residual = records.residuals(run.predicted.clone());
-    let document = maps.document(
-        serde_json::Value::Object(Default::default()),
-        fields.clone(),
-    );
+    // Before it is saved the fit names no images: `maps` and `uncertainty` are empty.
+    let mut unsaved = fields.clone();
+    unsaved.insert("uncertainty".into(), serde_json::json!({}));
+    let document = maps.document(serde_json::Value::Object(Default::default()), unsaved);
     let out = PyDict::new(py);
     out.set_item(
         "json",
@@ -322,7 +333,7 @@ fn fit_maps<'py>(
     }
     out.set_item("maps", arrays)?;
     let saved = FitOutput {
-        form: Form::Maps(maps.clone(), fields),
+        form: Form::Maps(maps.clone(), run.fit.uncertainty.clone(), fields),
     };
     if args.output.is_some() {
         saved.save(py, output)?;

@@ -65,7 +65,8 @@ def test_maps_fit_is_the_command_lines_fit(tmp_path):
     expected = read_fit(tmp_path / "cli.json")
     data = without_timings(fit.data)
     assert data.pop("maps") == {}
-    assert data == {k: v for k, v in expected.items() if k != "maps"}
+    assert data.pop("uncertainty") == {}
+    assert data == {k: v for k, v in expected.items() if k not in ("maps", "uncertainty")}
     assert fit.maps["roughness"].shape == (16, 16, 2)
     assert fit.maps["diffuse"].shape == fit.maps["specular"].shape == (16, 16, 3)
     # The sample is copper (alpha 0.65) on red paint: both roughnesses are among the texels.
@@ -74,7 +75,10 @@ def test_maps_fit_is_the_command_lines_fit(tmp_path):
     (tmp_path / "py").mkdir()
     fit.save(tmp_path / "py" / "cli.json")
     assert read_fit(tmp_path / "py" / "cli.json") == expected
-    for image in expected["maps"].values():
+    images = list(expected["maps"].values())
+    images += [entry["file"] for entry in expected["uncertainty"].values() if "file" in entry]
+    assert len(images) == 6
+    for image in images:
         assert (tmp_path / "py" / image).read_bytes() == (tmp_path / image).read_bytes()
 
 

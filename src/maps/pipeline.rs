@@ -4,7 +4,9 @@
 //! ([`super::fit::fit_maps`]) to every photo but the held-out one and predicts every photo;
 //! [`MapsSet::fit_file_fields`] are what the maps fit file adds to the maps. Nothing here prints.
 
-use super::fit::{fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions, Normals};
+use super::fit::{
+    fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions, Normals, Uncertainty,
+};
 use super::render::render_maps;
 use super::{MaterialMaps, TexelGrid};
 use crate::bsdf::Model;
@@ -233,13 +235,8 @@ impl MapsSet {
         serde_json::Value,
         serde_json::Map<String, serde_json::Value>,
     )> {
-        let beside = MaterialMaps::folder_beside(path);
-        let prefix = beside.file_name().unwrap_or_default().to_string_lossy();
-        let maps = run.fit.maps.write_images(folder, &prefix)?;
-        let mut fields = self.fit_file_fields(run);
-        let uncertainty = run.fit.uncertainty.write_images(folder, &prefix)?;
-        fields.insert("uncertainty".into(), uncertainty);
-        Ok((maps, fields))
+        let fields = self.fit_file_fields(run);
+        write_fit_images(&run.fit.maps, &run.fit.uncertainty, path, folder, fields)
     }
 
     /// The fields a maps fit file adds to the material (`maps_fit`, `texels`, `holdout`,
@@ -275,6 +272,29 @@ impl MapsSet {
         extra.insert("version".into(), json!(env!("CARGO_PKG_VERSION")));
         extra
     }
+}
+
+/// Writes `maps` and their `uncertainty` into `folder` under the names the fit file `path`
+/// gives them ([`MaterialMaps::folder_beside`]): the fit file's `maps` object, and `fields` with
+/// `uncertainty` added.
+pub fn write_fit_images(
+    maps: &MaterialMaps,
+    uncertainty: &Uncertainty,
+    path: &Path,
+    folder: &Path,
+    mut fields: serde_json::Map<String, serde_json::Value>,
+) -> Result<(
+    serde_json::Value,
+    serde_json::Map<String, serde_json::Value>,
+)> {
+    let beside = MaterialMaps::folder_beside(path);
+    let prefix = beside.file_name().unwrap_or_default().to_string_lossy();
+    let entry = maps.write_images(folder, &prefix)?;
+    fields.insert(
+        "uncertainty".into(),
+        uncertainty.write_images(folder, &prefix)?,
+    );
+    Ok((entry, fields))
 }
 
 /// The naive baseline of a held-out photo: the relative error of predicting it by the mean of
