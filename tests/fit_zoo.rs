@@ -31,6 +31,7 @@
 //! least 98% of the cases reach the optimum and that every miss is warned.
 
 mod common;
+use common::zoo::*;
 use common::*;
 use std::f64::consts::PI;
 use std::fmt::Write as _;
@@ -43,86 +44,6 @@ const LOSS_TOLERANCE: f64 = 0.02;
 const ALPHA_TOLERANCE: f64 = 0.03;
 /// Share of the cases that must reach the optimum.
 const REACH_SHARE: f64 = 0.98;
-
-/// Measured complex IOR (eta, k) at 650, 550 and 450 nm (R, G, B), from
-/// ../shared/data/conductors_nk.json: refractiveindex.info's tables of Johnson & Christy,
-/// Phys. Rev. B 6, 4370 (1972) for Cu and Au and Phys. Rev. B 9, 5056 (1974) for Ni and Cr, and
-/// of Rakic, Appl. Opt. 34, 4755 (1995) for Al. Copied here so the test does not need the file.
-const CONDUCTORS: [(&str, [f64; 3], [f64; 3]); 5] = [
-    ("Cu", [0.2378, 1.0066, 1.2404], [3.6264, 2.5823, 2.3929]),
-    ("Au", [0.1556, 0.4241, 1.3831], [3.6024, 2.4721, 1.9155]),
-    ("Al", [1.5580, 1.0152, 0.6332], [7.7124, 6.6273, 5.4544]),
-    ("Ni", [1.9900, 1.9212, 1.7290], [4.2086, 3.6158, 2.9435]),
-    ("Cr", [3.1071, 3.1812, 2.3230], [3.3314, 3.3291, 3.1350]),
-];
-
-/// splitmix64 (Steele, Lea & Flood 2014): a tiny, well-mixed generator, enough to draw cases.
-struct Rng(u64);
-
-impl Rng {
-    fn new(seed: u64) -> Rng {
-        Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xF17_200)
-    }
-
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.unit()
-    }
-
-    fn log_range(&mut self, lo: f64, hi: f64) -> f64 {
-        (lo.ln() + (hi.ln() - lo.ln()) * self.unit()).exp()
-    }
-
-    /// Uniform in lo..=hi.
-    fn int(&mut self, lo: usize, hi: usize) -> usize {
-        lo + (self.next_u64() % (hi - lo + 1) as u64) as usize
-    }
-
-    fn chance(&mut self, p: f64) -> bool {
-        self.unit() < p
-    }
-}
-
-type V3 = [f64; 3];
-
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn length(a: V3) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
-}
-
-fn normalize(a: V3) -> V3 {
-    let l = length(a);
-    [a[0] / l, a[1] / l, a[2] / l]
-}
-
-/// A point `distance` from the origin, `tilt_deg` off the normal (+z), at azimuth `azimuth`.
-fn spherical(tilt_deg: f64, azimuth: f64, distance: f64) -> V3 {
-    let t = tilt_deg.to_radians();
-    [
-        distance * t.sin() * azimuth.cos(),
-        distance * t.sin() * azimuth.sin(),
-        distance * t.cos(),
-    ]
-}
-
-fn toml_v3(v: V3) -> String {
-    format!("[{:.4}, {:.4}, {:.4}]", v[0], v[1], v[2])
-}
 
 #[derive(Clone, Copy, PartialEq)]
 enum CameraModel {
@@ -143,62 +64,6 @@ impl Eye {
         Eye {
             position: spherical(tilt_deg, azimuth, distance),
             up: [-azimuth.sin(), azimuth.cos(), 0.0],
-        }
-    }
-}
-
-#[derive(Clone, Copy)]
-enum Light {
-    Point { position: V3, intensity: f64 },
-    Flash { intensity: f64 },
-    Directional { direction: V3, irradiance: f64 },
-}
-
-impl Light {
-    fn scaled(self, s: f64) -> Light {
-        match self {
-            Light::Point {
-                position,
-                intensity,
-            } => Light::Point {
-                position,
-                intensity: intensity * s,
-            },
-            Light::Flash { intensity } => Light::Flash {
-                intensity: intensity * s,
-            },
-            Light::Directional {
-                direction,
-                irradiance,
-            } => Light::Directional {
-                direction,
-                irradiance: irradiance * s,
-            },
-        }
-    }
-
-    fn toml(&self) -> String {
-        let rgb = |v: f64| format!("[{v:.6e}, {v:.6e}, {v:.6e}]");
-        match self {
-            Light::Point {
-                position,
-                intensity,
-            } => format!(
-                "{{ kind = \"point\", position = {}, intensity = {} }}",
-                toml_v3(*position),
-                rgb(*intensity)
-            ),
-            Light::Flash { intensity } => {
-                format!("{{ kind = \"flash\", intensity = {} }}", rgb(*intensity))
-            }
-            Light::Directional {
-                direction,
-                irradiance,
-            } => format!(
-                "{{ kind = \"directional\", direction = {}, irradiance = {} }}",
-                toml_v3(*direction),
-                rgb(*irradiance)
-            ),
         }
     }
 }
@@ -731,7 +596,7 @@ const HEADER: [&str; 16] = [
 fn run_case(mut case: Case) -> Row {
     let started = Instant::now();
     let dir = tempfile::tempdir().unwrap();
-    let _keep = KeepOnDrop(dir.path().to_path_buf(), case.id);
+    let _keep = KeepOnDrop(dir.path().to_path_buf(), case.id, "FIT_ZOO_KEEP");
     let material = dir.path().join("material.json");
     let capture = dir.path().join("capture.toml");
     let set = dir.path().join("set");
@@ -740,24 +605,8 @@ fn run_case(mut case: Case) -> Row {
         case.scale_lights(dir.path())?;
         std::fs::write(&material, case.material_json()).unwrap();
         std::fs::write(&capture, case.capture_toml()).unwrap();
-        let (noise, samples, seed) = (
-            format!("{}", case.noise),
-            case.pixel_samples.to_string(),
-            case.synth_seed.to_string(),
-        );
-        try_synth(
-            &material,
-            &capture,
-            &set,
-            &[
-                "--noise",
-                &noise,
-                "--pixel-samples",
-                &samples,
-                "--seed",
-                &seed,
-            ],
-        )?;
+        let files = (material.as_path(), capture.as_path(), set.as_path());
+        synth_case(files, case.noise, case.pixel_samples, case.synth_seed)?;
         peak = (0..case.photos.len())
             .map(|i| brightest(&set.join(format!("{i:02}.exr"))))
             .fold(0.0, f64::max);
@@ -791,49 +640,6 @@ fn run_case(mut case: Case) -> Row {
         outcome,
         seconds: started.elapsed().as_secs_f64(),
     }
-}
-
-/// With `FIT_ZOO_KEEP=DIR`, copies a case's folder (manifests, photos, fits) to `DIR/<id>`
-/// before its temporary folder goes.
-struct KeepOnDrop(std::path::PathBuf, u64);
-
-impl Drop for KeepOnDrop {
-    fn drop(&mut self) {
-        if let Ok(keep) = std::env::var("FIT_ZOO_KEEP") {
-            let to = Path::new(&keep).join(self.1.to_string());
-            let status = std::process::Command::new("cp")
-                .arg("-r")
-                .arg(&self.0)
-                .arg(&to)
-                .status();
-            if !status.is_ok_and(|s| s.success()) {
-                eprintln!(
-                    "FIT_ZOO_KEEP: could not copy {} to {}",
-                    self.0.display(),
-                    to.display()
-                );
-            }
-        }
-    }
-}
-
-/// The largest channel value of a linear EXR image.
-fn brightest(path: &Path) -> f64 {
-    let image = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |_, _| 0.0f32,
-        |peak: &mut f32, _, (r, g, b, _): (f32, f32, f32, f32)| *peak = peak.max(r.max(g).max(b)),
-    )
-    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    f64::from(image.layer_data.channel_data.pixels)
-}
-
-fn env_number(key: &str, default: u64) -> u64 {
-    std::env::var(key).map_or(default, |v| {
-        v.trim()
-            .parse()
-            .unwrap_or_else(|_| panic!("{key}={v}: not a non-negative integer"))
-    })
 }
 
 fn markdown(rows: &[Row], seed: u64, misses: usize, unwarned: usize, seconds: f64) -> String {

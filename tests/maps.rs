@@ -4,8 +4,8 @@
 mod common;
 
 use bouncefit::bsdf::Model;
-use bouncefit::maps::{AnyMaterial, MaterialMaps, TexelGrid};
-use bouncefit::material::{FresnelSpec, Material};
+use bouncefit::maps::{AnyMaterial, MaterialMaps};
+use common::maps_truth::maps_of_materials;
 use common::{png_size, read_json, repo, run_bad, run_ok, strings, synth};
 use std::path::{Path, PathBuf};
 
@@ -17,58 +17,13 @@ const PAINT_F0: [f64; 3] = [0.04; 3];
 /// The truth: a disc and a band of rough copper on paint whose albedo varies across the
 /// sample, on a `side` x `side` texel grid.
 fn truth_maps(model: Model, side: usize) -> MaterialMaps {
-    let base = Material {
-        model,
-        ndf: Default::default(),
-        height: Default::default(),
-        alpha: [0.3; 2],
-        fresnel: FresnelSpec::Schlick { f0: [0.04; 3] },
-        diffuse: [0.0; 3],
-    };
-    let grid = TexelGrid {
-        width: side,
-        height: side,
-    };
-    let metal = |t: usize| {
-        let (u, v) = (
-            ((t % side) as f64 + 0.5) / side as f64,
-            ((t / side) as f64 + 0.5) / side as f64,
-        );
-        (u - 0.55).powi(2) + (v - 0.5).powi(2) < 0.28f64.powi(2) || v < 0.15
-    };
-    let paint_diffuse = |t: usize| {
-        let u = ((t % side) as f64 + 0.5) / side as f64;
-        [0.55, 0.2 + 0.25 * u, 0.12]
-    };
-    let texels = 0..grid.len();
-    MaterialMaps {
-        grid,
-        diffuse: Some(
-            texels
-                .clone()
-                .map(|t| if metal(t) { METAL.2 } else { paint_diffuse(t) })
-                .collect(),
-        ),
-        specular: Some(
-            texels
-                .clone()
-                .map(|t| if metal(t) { METAL.0 } else { PAINT_F0 })
-                .collect(),
-        ),
-        roughness: Some(
-            texels
-                .map(|t| {
-                    if metal(t) {
-                        [METAL.1; 2]
-                    } else {
-                        [PAINT_ALPHA; 2]
-                    }
-                })
-                .collect(),
-        ),
-        normal: None,
-        base,
-    }
+    maps_of_materials(model, side, |u, v| {
+        if (u - 0.55).powi(2) + (v - 0.5).powi(2) < 0.28f64.powi(2) || v < 0.15 {
+            METAL
+        } else {
+            (PAINT_F0, PAINT_ALPHA, [0.55, 0.2 + 0.25 * u, 0.12])
+        }
+    })
 }
 
 /// The copper-flash template (9 rectified flash photos of an 8 cm sample) at `side` pixels,
@@ -583,7 +538,7 @@ fn three_material_truth(side: usize, red: f64) -> MaterialMaps {
     let gold = ([red, 0.78, 0.34], 0.4, [0.0; 3]);
     let ceramic = ([0.04; 3], 0.35, [0.6; 3]);
     let paint = ([0.04; 3], PAINT_ALPHA, [0.08, 0.18, 0.45]);
-    maps_of_materials(side, |u, v| {
+    maps_of_materials(Model::KullaConty, side, |u, v| {
         if ((u - 0.38) / 0.30).powi(2) + ((v - 0.5) / 0.223).powi(2) < 1.0 {
             gold
         } else if (0.78..0.91).contains(&u) {
@@ -592,26 +547,6 @@ fn three_material_truth(side: usize, red: f64) -> MaterialMaps {
             paint
         }
     })
-}
-
-/// `kulla-conty` maps of `side` x `side` texels, each texel the material (F0, alpha, albedo)
-/// that `material` gives at its centre `(u, v)` in [0, 1]^2 (v along the rows).
-fn maps_of_materials(
-    side: usize,
-    material: impl Fn(f64, f64) -> ([f64; 3], f64, [f64; 3]),
-) -> MaterialMaps {
-    let at = |t: usize| {
-        material(
-            ((t % side) as f64 + 0.5) / side as f64,
-            ((t / side) as f64 + 0.5) / side as f64,
-        )
-    };
-    let mut maps = truth_maps(Model::KullaConty, side);
-    let texels = 0..side * side;
-    maps.specular = Some(texels.clone().map(|t| at(t).0).collect());
-    maps.roughness = Some(texels.clone().map(|t| [at(t).1; 2]).collect());
-    maps.diffuse = Some(texels.map(|t| at(t).2).collect());
-    maps
 }
 
 /// The capture of [`three_material_truth`]: an 8 cm sample, rectified photos of `side` pixels,
@@ -742,7 +677,7 @@ fn copper_rubber_ceramic_truth(side: usize) -> MaterialMaps {
     let copper = ([0.95, 0.64, 0.54], 0.6, [0.0; 3]);
     let rubber = ([0.04; 3], 0.5, [0.05; 3]);
     let ceramic = ([0.04; 3], 0.1, [0.8, 0.78, 0.72]);
-    maps_of_materials(side, |u, v| {
+    maps_of_materials(Model::KullaConty, side, |u, v| {
         if v >= 0.55 && u < 0.5 {
             copper
         } else if (0.146..0.333).contains(&v) {

@@ -1,6 +1,9 @@
 //! Helpers shared by the integration tests: run the binary, read JSON, compare with truth.
 #![allow(dead_code)]
 
+pub mod maps_truth;
+pub mod zoo;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
