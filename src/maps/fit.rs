@@ -16,7 +16,7 @@
 //! | 2 | noise level | `sigma^2 = sum r^2 / (residuals - parameters)` of stage 1, so the data term is a Gaussian log-likelihood and the prior's units are those of the coordinates |
 //! | 3 | `K` basis materials | k-means over the texels' specular coordinates (`ln alpha`, `logit F0`), each coordinate weighted by its Gauss-Newton precision `(J^T J)_jj` (a texel's diagonal Laplace approximation), so poorly seen texels hardly move the bases and are assigned by what is seen of them |
 //! | 4 | maps | per-texel maximum a posteriori fit: prior `N(basis, 0.25^2)` on `ln alpha` and `N(basis, 0.5^2)` on `logit F0`, flat-ish `N(0, 3^2)` on `logit diffuse`, `N(0, 0.25^2)` on normal slopes; each texel as either kind (a texel of the basis's other kind takes only its roughness), from the texel's own and its basis's coordinates, then a second round of re-assignment and re-fit from its own; the texels' priors are centred on the precision-weighted means of their basis's texels, and the bases reported are then re-estimated by maximum likelihood on the photos of their texels of their kind together (Gauss-Newton, each texel's own albedo re-fitted with it, texels the basis cannot explain left out, [`pooled_centre`]), since that mean is biased low under noise |
-//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels and at their resolution ([`texel_relative_error`]); of the `K` within 2% of the best error, the one with the lowest BIC of its clustering ([`fewest_good_bases`]; blends of two bases, bases that do not pay for themselves in that BIC and bases left with under 1% of the texels or covering no 2 x 2 block of them are dropped, [`Clusters::drop_non_materials`], [`take_negligible_bases_texels`], [`Clusters::drop_empty`]), with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
+//! | 5 | choice of `K` and of a roughness floor | 1 to `max_bases`, each with each floor of [`ROUGHNESS_FLOORS`] (none, 0.05 to 0.8) laid on the fitted texels' roughness, by the relative error of a photo left out of stages 1-4 (the validation photo), on a quarter of the texels and at their resolution ([`texel_relative_error`]); of the `K` within 2% of the best error, the one with the lowest BIC of its clustering ([`fewest_good_bases`]; blends of two bases (texels all on edges, lying between two bases), bases that do not pay for themselves in that BIC, bases left with under 1% of the texels or covering no 2 x 2 block of them, and bases their texels' photos do not pay for in Schwarz's criterion are dropped, [`Clusters::drop_non_materials`], [`take_negligible_bases_texels`], [`Clusters::drop_empty`]), with their best floor, and refitted on every photo and texel, the floor laid on the result (a cross-validated regulariser, as the smoothing weight of Hastie, Tibshirani & Friedman section 7.10); with [`Normals::Auto`], stage 5 runs without and with normals, and normals are kept only when their best validation error beats the other's by more than 2% |
 //!
 //! On a grid of more than [`MapsFitOptions::coarsest`] texels (default [`COARSEST_SIDE`]^2),
 //! the five stages run on a grid of half the resolution with photos of half the resolution,
@@ -363,8 +363,26 @@ impl TexelBlocks {
             .collect()
     }
 
+    /// Where the texels of these blocks lie.
+    fn layout(&self) -> Layout {
+        Layout {
+            grid: self.grid,
+            stride: self.stride,
+        }
+    }
+}
+
+/// Where texels lie: their grid, and the spacing of the texels in use (1: every texel; 2:
+/// stage 5's sample of every other texel of every other row).
+#[derive(Clone, Copy)]
+struct Layout {
+    grid: TexelGrid,
+    stride: usize,
+}
+
+impl Layout {
     /// The up to four texels a stride away from `t` along the rows and columns.
-    fn neighbours(&self, t: usize) -> impl Iterator<Item = usize> + '_ {
+    fn neighbours(self, t: usize) -> impl Iterator<Item = usize> {
         let (w, h, d) = (self.grid.width, self.grid.height, self.stride);
         let (c, r) = (t % w, t / w);
         [
@@ -1348,7 +1366,7 @@ fn basis_fits(
     let mut texels = first.texels.clone();
     let seen = blocks.seen();
     let points = ClusteringPoints::new(&texels, specular, roughness);
-    let mut clusters = weighted_kmeans(&texels, &points, &seen, roughness, k);
+    let mut clusters = weighted_kmeans(&texels, &points, (&seen, blocks.layout()), roughness, k);
     let bic = clustering_bic(&points, &seen, &clusters.centres, roughness);
     // Round 0: the texel solved under every basis and as either kind, each from its own
     // coordinates moved to the basis; the labels are then chosen together
@@ -1377,7 +1395,8 @@ fn basis_fits(
         .map(|options| options.iter().map(|o| o.0).enumerate().collect())
         .collect();
     clusters.assignment = label_smoothing(&costs, blocks);
-    take_negligible_bases_texels(&mut clusters.assignment, &candidates, blocks, seen.len());
+    let sizes = (seen.len(), specular);
+    take_negligible_bases_texels(&mut clusters.assignment, &candidates, blocks, sizes);
     texels = candidates
         .into_iter()
         .zip(&clusters.assignment)
@@ -1469,25 +1488,43 @@ const NEGLIGIBLE_SHARE: f64 = 0.01;
 /// Gives each texel labelled with a basis that is not a material the kept basis under which
 /// its posterior (`candidates`, as in [`basis_fits`]) is least; the emptied bases are then
 /// dropped with the empty ones ([`Clusters::drop_empty`]). A basis is not a material when it
-/// holds under [`NEGLIGIBLE_SHARE`] of the `seen` texels or covers no area
-/// ([`covers_an_area`]).
+/// holds under [`NEGLIGIBLE_SHARE`] of the `seen` texels, covers no area
+/// ([`covers_an_area`]), or its texels' photos do not pay for it: the sum over its texels of
+/// how much more their posterior costs (twice the negative log posterior) under the best
+/// other basis is under `(specular + 1) ln seen`, the price of its `specular` coordinates and
+/// its mixing proportion in Schwarz's criterion (Schwarz 1978, "Estimating the dimension of a
+/// model", Annals of Statistics 6). The clustering's own criterion ([`clustering_bic`]) reads
+/// the texels' first estimates, where a few texels a second optimum holds (a dark rough
+/// dielectric fitted as a sharp one whose highlight no photo shows) form a tight group: in the
+/// maps zoo (`tests/maps_zoo.rs`) such bases of 2-3% of the texels gained their photos 9-35
+/// against a price of 38, and every basis of a material over 1000.
 fn take_negligible_bases_texels(
     labels: &mut [usize],
     candidates: &[Vec<(f64, TexelFit)>],
     blocks: &TexelBlocks,
-    seen: usize,
+    (seen, specular): (usize, usize),
 ) {
     let k = candidates.first().map_or(0, Vec::len);
     let mut counts = vec![0usize; k];
+    let mut gains = vec![0.0; k];
     for (&label, options) in labels.iter().zip(candidates) {
         // Seen texels only: an unseen one has no residuals.
-        counts[label] += usize::from(options[label].1.residuals > 0);
+        if options[label].1.residuals == 0 {
+            continue;
+        }
+        counts[label] += 1;
+        let other = (0..k)
+            .filter(|&b| b != label)
+            .map(|b| options[b].0)
+            .fold(f64::INFINITY, f64::min);
+        gains[label] += other - options[label].0;
     }
-    let kept: Vec<bool> = counts
-        .iter()
-        .enumerate()
-        .map(|(b, &c)| {
-            c as f64 >= NEGLIGIBLE_SHARE * seen as f64 && covers_an_area(labels, blocks, b)
+    let price = (specular + 1) as f64 * (seen.max(1) as f64).ln();
+    let kept: Vec<bool> = (0..k)
+        .map(|b| {
+            counts[b] as f64 >= NEGLIGIBLE_SHARE * seen as f64
+                && gains[b] >= price
+                && covers_an_area(labels, blocks, b)
         })
         .collect();
     if !kept.iter().any(|&k| k) {
@@ -1759,6 +1796,7 @@ fn label_smoothing(candidates: &[Vec<(usize, f64)>], blocks: &TexelBlocks) -> Ve
                     }
                     least(t, &|l, cost| {
                         let disagree = blocks
+                            .layout()
                             .neighbours(t)
                             .filter(|&n| seen(n) && labels[n] != l)
                             .count();
@@ -1932,7 +1970,7 @@ impl Clusters {
         &mut self,
         texels: &[TexelFit],
         points: &ClusteringPoints,
-        seen: &[usize],
+        (seen, layout): (&[usize], Layout),
         roughness: usize,
     ) -> Vec<usize> {
         let mut dropped = Vec::new();
@@ -1945,7 +1983,7 @@ impl Clusters {
                 clustering_bic(points, seen, &centres, roughness)
             };
             let drop = (0..k)
-                .find(|&c| self.is_blend(texels, seen, c, roughness))
+                .find(|&c| self.is_blend(texels, (seen, layout), c, roughness))
                 .or_else(|| {
                     (0..k)
                         .map(|c| (c, without(c)))
@@ -1972,16 +2010,28 @@ impl Clusters {
     /// edge cuts it, so its estimate lies between theirs (a pixel is nearly linear in F0), at
     /// a place that varies from texel to texel; the texels of a material lying between two
     /// others in these coordinates (a dielectric of middling roughness) sit at one place,
-    /// spread by their noise alone.
-    fn is_blend(&self, texels: &[TexelFit], seen: &[usize], c: usize, roughness: usize) -> bool {
-        let members: Vec<Vec<f64>> = seen
+    /// spread by their noise alone. And (0), on the texel grid (`layout`), nearly all of `c`'s
+    /// texels are on an edge, beside a texel of another basis ([`BLEND_EDGE_SHARE`]), as a line
+    /// astride an edge is and a material covering an area is not.
+    fn is_blend(
+        &self,
+        texels: &[TexelFit],
+        (seen, layout): (&[usize], Layout),
+        c: usize,
+        roughness: usize,
+    ) -> bool {
+        let indices: Vec<usize> = seen
             .iter()
-            .filter(|&&t| self.assignment[t] == c)
-            .map(|&t| clustering_values(&texels[t], self.centres[c].len(), roughness))
+            .copied()
+            .filter(|&t| self.assignment[t] == c)
             .collect();
-        if members.len() < 2 {
+        if indices.len() < 2 || self.edge_share(&indices, (seen, layout)) < BLEND_EDGE_SHARE {
             return false;
         }
+        let members: Vec<Vec<f64>> = indices
+            .iter()
+            .map(|&t| clustering_values(&texels[t], self.centres[c].len(), roughness))
+            .collect();
         let centre = centre_values(&self.centres[c], roughness);
         let dim = centre.len();
         let spread: Vec<f64> = (0..dim)
@@ -2023,7 +2073,36 @@ impl Clusters {
             })
         })
     }
+
+    /// The share of the texels `members` (of one basis) that have a seen neighbour
+    /// ([`Layout::neighbours`]) of another basis.
+    fn edge_share(&self, members: &[usize], (seen, layout): (&[usize], Layout)) -> f64 {
+        let mut is_seen = vec![false; self.assignment.len()];
+        for &t in seen {
+            is_seen[t] = true;
+        }
+        let on_edge = members
+            .iter()
+            .filter(|&&t| {
+                layout
+                    .neighbours(t)
+                    .any(|n| is_seen[n] && self.assignment[n] != self.assignment[t])
+            })
+            .count();
+        on_edge as f64 / members.len().max(1) as f64
+    }
 }
+
+/// The least share of a basis's texels beside a texel of another basis for the basis to be
+/// taken for a blend ([`Clusters::is_blend`]). The texels astride an edge form a line one or
+/// two texels wide, each beside a material it mixes: nearly all of them are on an edge (87%
+/// and 93% of two such bases of the maps zoo, `tests/maps_zoo.rs`, on stage 5's sample of
+/// every other texel and on every texel; k-means labels a few inside). A material that covers
+/// an area has texels inside it: there a band of 17% of the sample had 25% of its texels
+/// inside, a background of 47% 64%. Before, a material lying between two others in roughness
+/// was dropped as their blend whatever its extent: that background (alpha 0.116, between
+/// 0.047 and 0.414) went, and with it every basis but one.
+const BLEND_EDGE_SHARE: f64 = 0.8;
 
 /// The least spread along the segment between two bases, as a fraction of its length, of the
 /// texels of a basis taken for a blend of the two ([`Clusters::is_blend`]): texels whose mixing
@@ -2214,7 +2293,7 @@ impl ClusteringPoints {
 fn weighted_kmeans(
     texels: &[TexelFit],
     points: &ClusteringPoints,
-    seen: &[usize],
+    (seen, layout): (&[usize], Layout),
     roughness: usize,
     k: usize,
 ) -> Clusters {
@@ -2267,7 +2346,7 @@ fn weighted_kmeans(
         // The texels of a basis that is no material are no candidate for the next centre, so
         // the next goes to a material (at 16^2 the edge texels of the three-material truth
         // came before the ceramic).
-        let dropped = clusters.drop_non_materials(texels, points, seen, roughness);
+        let dropped = clusters.drop_non_materials(texels, points, (seen, layout), roughness);
         candidates.retain(|t| !dropped.contains(t));
         failed = if clusters.centres.len() > before {
             0
@@ -2720,12 +2799,19 @@ mod tests {
         }
     }
 
-    /// Weighted k-means of every texel of `texels` with `k` bases: each basis's kind, alpha and
-    /// red F0, by alpha.
+    /// Weighted k-means of every texel of `texels`, laid in one row in their order, with `k`
+    /// bases: each basis's kind, alpha and red F0, by alpha.
     fn kmeans_bases(texels: &[TexelFit], k: usize) -> Vec<(Kind, f64, f64)> {
         let seen: Vec<usize> = (0..texels.len()).collect();
         let points = ClusteringPoints::new(texels, 4, 1);
-        let clusters = weighted_kmeans(texels, &points, &seen, 1, k);
+        let row = Layout {
+            grid: TexelGrid {
+                width: texels.len(),
+                height: 1,
+            },
+            stride: 1,
+        };
+        let clusters = weighted_kmeans(texels, &points, (&seen, row), 1, k);
         let mut found: Vec<(Kind, f64, f64)> = clusters
             .centres
             .iter()
