@@ -4,10 +4,8 @@
 //! A fit file is a material file with more fields (loss, trace, timings), so reading ignores
 //! fields it does not know.
 
-use crate::bsdf::heitz::Heitz;
 use crate::bsdf::single::SingleBounce;
-use crate::bsdf::wang::{Wang, WangEstimator};
-use crate::bsdf::{BounceCap, Brdf, Model};
+use crate::bsdf::{registry, BounceCap, Brdf, Model};
 use crate::error::{Error, Result};
 use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
 use crate::scalar::{Real, Rgb};
@@ -310,7 +308,6 @@ impl Material {
     }
 
     /// The specular model as a BRDF object (the diffuse layer is added by the renderer).
-    /// `heitz` ignores `height`: its first order is the height-correlated single bounce.
     pub fn brdf(&self) -> Box<dyn Brdf> {
         self.capped_brdf(BounceCap::NONE)
     }
@@ -318,23 +315,7 @@ impl Material {
     /// [`Material::brdf`] with the stochastic estimators limited to paths of `cap` reflections
     /// (the analytic models ignore it).
     pub fn capped_brdf(&self, cap: BounceCap) -> Box<dyn Brdf> {
-        let single = self.single::<f64>();
-        let (mf, fresnel) = (single.microfacet, single.fresnel);
-        let wang = |estimator| Box::new(Wang::new(single, estimator).with_bounce_cap(cap));
-        match self.model {
-            Model::Single => Box::new(single),
-            Model::FastMsx => Box::new(crate::bsdf::fast_msx::FastMsx { single }),
-            Model::KullaConty => Box::new(crate::bsdf::kulla_conty::KullaConty::new(single)),
-            Model::Turquin => Box::new(crate::bsdf::turquin::Turquin::new(single)),
-            Model::Tabulated => Box::new(crate::bsdf::tabulated::Tabulated::new(single)),
-            Model::Bitterli => {
-                Box::new(crate::bsdf::bitterli::Bitterli::new(mf, fresnel).with_bounce_cap(cap))
-            }
-            Model::Cui => Box::new(crate::bsdf::cui::Cui::new(mf, fresnel).with_bounce_cap(cap)),
-            Model::Heitz => Box::new(Heitz::new(mf, fresnel).with_bounce_cap(cap)),
-            Model::WangPt => wang(WangEstimator::PathTracing),
-            Model::WangBdpt => wang(WangEstimator::Bidirectional),
-        }
+        registry::brdf(self.model, self.single(), cap)
     }
 }
 

@@ -38,7 +38,8 @@ use crate::render::batch::Precision;
 
 use crate::albedo::{directional_albedo, mean_value, Adjoint};
 
-use crate::bsdf::{differentiable, BounceCap, Brdf, Model};
+use crate::bsdf::registry::differentiable;
+use crate::bsdf::{BounceCap, Brdf, Model};
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::{Height, NdfKind};
 use crate::random::rng_stream;
@@ -174,7 +175,7 @@ pub struct ModelReport {
     /// What the deviation compares.
     pub reference: String,
     /// The batch kernel's sweep in each lane precision, for the models it serves
-    /// ([`batch::serves`]); empty for the others.
+    /// ([`crate::bsdf::registry::Capabilities::batch`]); empty for the others.
     pub batch: Vec<batch::BatchReport>,
     pub seconds: f64,
 }
@@ -235,7 +236,7 @@ fn surfaces(size: SweepSize, model: Model) -> Vec<Surface> {
         all
     };
     // `heitz`'s first order is the height-correlated single bounce whatever the setting.
-    let heights: &[Height] = if model == Model::Heitz {
+    let heights: &[Height] = if model.capabilities().explicit_heights {
         &[Height::Correlated]
     } else {
         &[Height::Correlated, Height::Uncorrelated]
@@ -453,15 +454,9 @@ fn run_query(model: Model, size: SweepSize, index: usize, q: &Query, seed: u64) 
     tally
 }
 
-/// Whether `model` conserves energy toward a fixed *view* direction rather than from a fixed
-/// light direction: Turquin 2019 (eq. 6-7) scales the lobe by a function of `wo` alone, so
-/// `integral f cos dwi = 1` for white Fresnel while `integral f cos dwo` is unbounded at grazing.
-fn conserves_toward_view(model: Model) -> bool {
-    model == Model::Turquin
-}
-
 /// White-Fresnel albedo at every roughness of the sweep and incidence up to 89.99 deg:
-/// `(albedo, se, where)` per check, over `wo` (or over `wi`, see [`conserves_toward_view`]).
+/// `(albedo, se, where)` per check, over `wo` (or over `wi`, see
+/// [`crate::bsdf::registry::Capabilities::conserves_toward_view`]).
 fn energy(model: Model, size: SweepSize, seed: u64) -> Vec<(f64, f64, String)> {
     let thetas = [0.0, 45.0, 80.0, 89.0, 89.99];
     let cases: Vec<(Surface, f64)> = surfaces(size, model)
@@ -475,7 +470,7 @@ fn energy(model: Model, size: SweepSize, seed: u64) -> Vec<(f64, f64, String)> {
         .map(|(i, (surface, theta))| {
             let brdf = surface.material(model).brdf();
             let adjoint;
-            let integrand: &dyn Brdf = if conserves_toward_view(model) {
+            let integrand: &dyn Brdf = if model.capabilities().conserves_toward_view {
                 adjoint = Adjoint(brdf.as_ref());
                 &adjoint
             } else {
@@ -493,7 +488,7 @@ fn energy(model: Model, size: SweepSize, seed: u64) -> Vec<(f64, f64, String)> {
                 surface.height.name(),
                 surface.alpha[0],
                 surface.alpha[1],
-                if conserves_toward_view(model) {
+                if model.capabilities().conserves_toward_view {
                     "o"
                 } else {
                     "i"
@@ -512,16 +507,7 @@ pub fn stress_model(
     progress: impl Fn(usize) + Sync,
 ) -> ModelReport {
     let start = std::time::Instant::now();
-    let stochastic = Material {
-        model,
-        ndf: NdfKind::Ggx,
-        height: Height::Correlated,
-        alpha: [0.5; 2],
-        fresnel: FresnelSpec::White,
-        diffuse: [0.0; 3],
-    }
-    .brdf()
-    .is_stochastic();
+    let stochastic = model.capabilities().stochastic();
     let qs = queries(size, model, stochastic);
     let done = std::sync::atomic::AtomicUsize::new(0);
     let tallies: Vec<Tally> = qs
@@ -575,7 +561,7 @@ pub fn stress_model(
         } else {
             "f32 vs f64, same formula".into()
         },
-        batch: if batch::serves(model) {
+        batch: if model.capabilities().batch.is_some() {
             [Precision::F32, Precision::F64]
                 .map(|precision| batch::sweep(model, size, precision))
                 .to_vec()

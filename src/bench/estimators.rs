@@ -347,9 +347,7 @@ fn summarise(
     heitz: &[Estimate],
     timing: (f64, f64),
 ) -> ModelMeasure {
-    let stochastic = configs
-        .first()
-        .is_some_and(|c| c.material(model).brdf().is_stochastic());
+    let stochastic = !configs.is_empty() && model.capabilities().stochastic();
     let mut mse = [0.0; SAMPLE_COUNTS.len()];
     let mut mse_rough = [None; SAMPLE_COUNTS.len()];
     let mut mse_vs_heitz = [0.0; SAMPLE_COUNTS.len()];

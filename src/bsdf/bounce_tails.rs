@@ -17,6 +17,7 @@
 //! can be larger where the single-bounce lobe is small.
 
 use super::albedo_table::embedded_slot;
+use super::registry::Paths;
 use super::{BounceCap, Model};
 use crate::microfacet::{Height, NdfKind};
 use std::sync::OnceLock;
@@ -58,13 +59,12 @@ pub fn alpha_node(i: usize) -> f64 {
 }
 
 impl Walk {
-    /// The walk `model` estimates with `height`; `None` for the analytic models.
-    pub fn of(model: Model, height: Height) -> Option<Walk> {
-        match (model, height) {
-            (Model::Heitz | Model::Bitterli | Model::Cui, _) => Some(Walk::Smith),
-            (Model::WangPt | Model::WangBdpt, Height::Correlated) => Some(Walk::WangCorrelated),
-            (Model::WangPt | Model::WangBdpt, Height::Uncorrelated) => Some(Walk::WangUncorrelated),
-            _ => None,
+    /// The walk of a model that integrates `paths` with `height`.
+    pub fn of(paths: Paths, height: Height) -> Walk {
+        match (paths, height) {
+            (Paths::Smith, _) => Walk::Smith,
+            (Paths::Wang, Height::Correlated) => Walk::WangCorrelated,
+            (Paths::Wang, Height::Uncorrelated) => Walk::WangUncorrelated,
         }
     }
 }
@@ -80,7 +80,7 @@ impl BounceTails {
     /// The table of `model` (with `ndf`, `height`), `None` for the analytic models.
     pub fn get(model: Model, ndf: NdfKind, height: Height) -> Option<&'static BounceTails> {
         static TABLES: [OnceLock<BounceTails>; 6] = [const { OnceLock::new() }; 6];
-        let walk = Walk::of(model, height)?;
+        let walk = Walk::of(model.capabilities().paths?, height);
         let slot = TABLE_KINDS
             .iter()
             .position(|&kind| kind == (ndf, walk))
@@ -276,7 +276,11 @@ mod tests {
                 .expect("a cap at this roughness") as usize;
             let brdf = Material {
                 fresnel: copper,
-                ..sampler(NdfKind::Ggx, Walk::of(model, height).unwrap(), alpha)
+                ..sampler(
+                    NdfKind::Ggx,
+                    Walk::of(model.capabilities().paths.unwrap(), height),
+                    alpha,
+                )
             }
             .brdf();
             for theta in [60.0f64, 85.0] {

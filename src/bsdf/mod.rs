@@ -1,4 +1,6 @@
-//! BRDF models: the common interface, the model names of the command line, and one file per model.
+//! BRDF models: the common interface, one file per model, and the registry of models
+//! ([`registry`]: the model names of the command line, what each model can do, and their
+//! constructors).
 //!
 //! Every model is a reflection-only BRDF of a flat sample in the local frame (`z` = normal,
 //! `wi` toward the light, `wo` toward the camera; PHYSICS.md "Conventions"). Values are `f` in
@@ -32,6 +34,7 @@ mod position_free;
 mod properties;
 #[cfg(test)]
 mod published_quirks;
+pub mod registry;
 pub mod roulette;
 pub mod single;
 pub mod tabulated;
@@ -42,9 +45,10 @@ mod tests;
 pub mod turquin;
 pub mod wang;
 
+pub use registry::Model;
+
 use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
-use serde::{Deserialize, Serialize};
 
 /// Most reflections a path of a stochastic estimator may have (`heitz`, `bitterli`, `cui`,
 /// `wang-*`): a walk that would go past it is not continued, so paths of more reflections are
@@ -157,7 +161,7 @@ pub trait Brdf: Send + Sync {
 
 /// The total value `f(wi, wo)` of a model at scalar type `T`: what the renderer needs. `f64`
 /// through any [`Brdf`] object; dual numbers (exact and pathwise derivatives for the fitter)
-/// through the models that are generic over the scalar ([`differentiable`]).
+/// through the models that are generic over the scalar ([`registry::differentiable`]).
 pub trait ScalarBrdf<T: Real>: Send + Sync {
     /// `f(wi, wo)` in 1/sr as `(single, multi)`: the single-bounce part and everything the
     /// model adds to it; stochastic models draw from `rng` exactly as [`Brdf::eval`] does, so
@@ -195,105 +199,5 @@ impl ScalarBrdf<f64> for dyn Brdf {
     #[inline]
     fn eval_total(&self, wi: Vec3<f64>, wo: Vec3<f64>, rng: &mut Rng) -> Rgb<f64> {
         Rgb(self.eval(wi, wo, rng).total())
-    }
-}
-
-/// `model` built on `single` at scalar type `T`, its stochastic estimators limited to `cap`,
-/// for the models whose value is generic over the scalar; `None` for `heitz` (explicit
-/// heights: finite differences only).
-pub fn differentiable<T: Real>(
-    model: Model,
-    single: single::SingleBounce<T>,
-    cap: BounceCap,
-) -> Option<Box<dyn ScalarBrdf<T>>> {
-    let (mf, fresnel) = (single.microfacet, single.fresnel);
-    let wang = |estimator| wang::Wang::new(single, estimator).with_bounce_cap(cap);
-    Some(match model {
-        Model::Single => Box::new(single),
-        Model::FastMsx => Box::new(fast_msx::FastMsx { single }),
-        Model::KullaConty => Box::new(kulla_conty::KullaConty::new(single)),
-        Model::Turquin => Box::new(turquin::Turquin::new(single)),
-        Model::Tabulated => Box::new(tabulated::Tabulated::new(single)),
-        Model::Bitterli => Box::new(bitterli::Bitterli::new(mf, fresnel).with_bounce_cap(cap)),
-        Model::Cui => Box::new(cui::Cui::new(mf, fresnel).with_bounce_cap(cap)),
-        Model::WangPt => Box::new(wang(wang::WangEstimator::PathTracing)),
-        Model::WangBdpt => Box::new(wang(wang::WangEstimator::Bidirectional)),
-        _ => return None,
-    })
-}
-
-/// The models the command line accepts (PHYSICS.md "Multi-bounce models").
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Model {
-    /// Walter et al. 2007: analytic, loses the energy of multiple bounces.
-    Single,
-    /// Rosales et al. 2023: single plus an analytic second-bounce lobe.
-    FastMsx,
-    /// Kulla & Conty 2017: single plus a tabulated compensation lobe.
-    KullaConty,
-    /// Turquin 2019: single scaled by a tabulated compensation factor.
-    Turquin,
-    /// Heitz et al. 2016's multiple-bounce lobe, tabulated once by order: deterministic.
-    Tabulated,
-    /// Bitterli & d'Eon 2022: position-free, hyperexponential heights, unbiased.
-    Bitterli,
-    /// Cui et al. 2023: position-free, segment term by dynamic programming, unbiased.
-    Cui,
-    /// Heitz et al. 2016: random walk on the Smith microsurface with explicit heights,
-    /// unbiased, energy conserving, reciprocal; the reference of the multi-bounce models.
-    Heitz,
-    /// Wang et al. 2022, position-free path integral estimated by path tracing.
-    WangPt,
-    /// Wang et al. 2022, position-free path integral estimated bidirectionally.
-    WangBdpt,
-}
-
-impl Model {
-    pub const ALL: [Model; 10] = [
-        Model::Single,
-        Model::Heitz,
-        Model::Bitterli,
-        Model::Cui,
-        Model::WangPt,
-        Model::WangBdpt,
-        Model::FastMsx,
-        Model::KullaConty,
-        Model::Turquin,
-        Model::Tabulated,
-    ];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Model::Single => "single",
-            Model::FastMsx => "fast-msx",
-            Model::KullaConty => "kulla-conty",
-            Model::Turquin => "turquin",
-            Model::Tabulated => "tabulated",
-            Model::Bitterli => "bitterli",
-            Model::Cui => "cui",
-            Model::Heitz => "heitz",
-            Model::WangPt => "wang-pt",
-            Model::WangBdpt => "wang-bdpt",
-        }
-    }
-}
-
-impl std::str::FromStr for Model {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Model::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<_> = Model::ALL.iter().map(|m| m.name()).collect();
-                format!("unknown model '{s}' (known: {})", names.join(", "))
-            })
-    }
-}
-
-impl std::fmt::Display for Model {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
     }
 }

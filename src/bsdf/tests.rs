@@ -2,6 +2,7 @@
 
 #![allow(clippy::needless_range_loop)] // channel loops over several parallel arrays read best indexed
 
+use super::registry::differentiable;
 use super::single::SingleBounce;
 use super::testing::COPPER;
 use super::*;

@@ -136,7 +136,7 @@ impl MapsConversion {
                 super::number(ior)
             ));
         }
-        if self.roughest.material.model != crate::bsdf::Model::Single {
+        if self.roughest.material.model.capabilities().multi.is_some() {
             notes.push(
                 "the multi-bounce note below is that of the roughest texel, which misses the \
                  most energy"

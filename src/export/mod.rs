@@ -175,7 +175,8 @@ impl Conversion {
     /// What a single-bounce renderer misses of the fitted model; `None` for `single`.
     pub fn energy(&self) -> Option<MultiBounceEnergy> {
         *self.energy.get_or_init(|| {
-            (self.material.model != Model::Single).then(|| multi_bounce_energy(&self.material))
+            let multi = self.material.model.capabilities().multi;
+            multi.map(|_| multi_bounce_energy(&self.material))
         })
     }
 

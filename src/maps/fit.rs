@@ -39,9 +39,10 @@
 //! thousands of walks per texel per iteration; they are refused with that reason.
 
 use super::{normal_from_slopes, MaterialMaps, ShadingFrame, TexelGrid};
+use crate::bsdf::registry::differentiable;
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::tabulated::{LobeDirections, Tabulated};
-use crate::bsdf::{differentiable, BounceCap, Model, ScalarBrdf};
+use crate::bsdf::{BounceCap, Model, ScalarBrdf};
 
 use crate::error::{Error, Result};
 use crate::fit::point::params::{logit, sigmoid, ParamSpace};
@@ -407,14 +408,15 @@ struct TexelModel<'a> {
 }
 
 /// For `tabulated` without normals, each sub-sample's directions as its lobe reads them
-/// ([`LobeDirections`]), prepared once for every evaluation of a fit; `None` otherwise (with
-/// normals the directions turn with each texel's slopes).
+/// ([`LobeDirections`], [`crate::bsdf::registry::Capabilities::prepared_directions`]),
+/// prepared once for every evaluation of a fit; `None` otherwise (with normals the directions
+/// turn with each texel's slopes).
 fn prepared_directions(
     space: &ParamSpace,
     normals: bool,
     records: &ShadingRecords,
 ) -> Option<Vec<Option<LobeDirections>>> {
-    (space.model == Model::Tabulated && !normals).then(|| {
+    (space.model.capabilities().prepared_directions && !normals).then(|| {
         (records.wi.par_iter().zip(&records.wo))
             .map(|(&wi, &wo)| LobeDirections::new(wi, wo))
             .collect()
@@ -950,20 +952,19 @@ impl TexelModel<'_> {
 /// Refuses the models a maps fit does not take (the stochastic estimators, see the module
 /// documentation), with the reason.
 pub fn check_model(model: Model) -> Result<()> {
-    let probe = Material {
-        model,
-        alpha: [GENERIC_ALPHA; 2],
-        fresnel: FresnelSpec::White,
-        diffuse: [0.0; 3],
-        ndf: Default::default(),
-        height: Default::default(),
-    };
-    if probe.brdf().is_stochastic() {
+    if model.capabilities().stochastic() {
+        let taken: Vec<&str> = Model::ALL
+            .iter()
+            .filter(|m| !m.capabilities().stochastic())
+            .map(|m| m.name())
+            .collect();
+        let (last, others) = taken.split_last().expect("a deterministic model");
         return Err(Error::argument(
             "--models",
             format!(
                 "{model} is stochastic: a maps fit would give each texel a noisy objective from a \
-                 few dozen records; maps fits take single, fast-msx, kulla-conty, turquin or tabulated"
+                 few dozen records; maps fits take {} or {last}",
+                others.join(", ")
             ),
         ));
     }

@@ -22,8 +22,9 @@
 
 use super::TASK_PIXELS;
 use crate::bsdf::fast_msx::{self, FastMsx};
+use crate::bsdf::registry::differentiable;
 use crate::bsdf::single::SingleBounce;
-use crate::bsdf::{differentiable, BounceCap, Model};
+use crate::bsdf::{BounceCap, Model};
 use crate::microfacet::{Fresnel, Height, Microfacet, NdfKind};
 use crate::scalar::{Rgb, Vec3};
 use crate::shading::ShadingRecords;

@@ -32,6 +32,8 @@
 use crate::bsdf::albedo_table::{AlbedoTable, MU_COUNT};
 use crate::bsdf::fast_msx::indirect_geometry;
 use crate::bsdf::kulla_conty::KullaConty;
+use crate::bsdf::registry::BatchLobe;
+pub use crate::bsdf::registry::Precision;
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::Model;
 use crate::microfacet::fresnel::{self, Fresnel};
@@ -48,44 +50,6 @@ const TASK_PIXELS: usize = super::TASK_PIXELS;
 
 /// `1 / (2 sqrt(pi))`: `d zL / d s` of Beckmann is this times `exp(-z^2 / s^2)`.
 const HALF_INV_SQRT_PI: f64 = 0.282_094_791_773_878_14;
-
-/// The arithmetic of the batch kernel's lanes.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
-#[serde(rename_all = "lowercase")]
-pub enum Precision {
-    /// Single precision lanes (the default): sixteen per AVX-512 instruction.
-    #[default]
-    F32,
-    /// Double precision lanes: the reference the `f32` lanes are measured against.
-    F64,
-}
-
-impl Precision {
-    /// The lanes a fit of `model` uses unless told otherwise: `f32` for `single`, `f64` for
-    /// every model with a multiple-bounce term. Measured: with `f32` lanes the cost's rounding
-    /// stalls L-BFGS's last line searches of those fits. On `aluminium-pinhole` (conductor)
-    /// and `copper-flash`, `f32` against `f64` lanes took: `kulla-conty` 288 and 180
-    /// evaluations against 67 and 110, `fast-msx` 234 and 124 against 57 and 65, `turquin` 186
-    /// and 206 against 90 and 177, `tabulated` 206 and 272 against 73 and 195, `bitterli` 473
-    /// and 411 against 100 and 224, `wang-pt` 59 and 190 against 48 and 155, to the same alpha;
-    /// `f64` lanes cost less than that difference (docs/speed.md).
-    pub fn default_for(model: Model) -> Precision {
-        match model {
-            Model::Single => Precision::F32,
-            _ => Precision::F64,
-        }
-    }
-}
 
 /// A lane's number type, `f32` or `f64`: the kernel's loops are written once over it.
 pub trait LaneFloat: Real + Default + PartialOrd + 'static {
@@ -352,28 +316,17 @@ impl<'a> From<&'a SingleBounce<f64>> for Lobe<'a> {
 
 impl<'a> Lobe<'a> {
     /// The whole value of `model` at `single`'s parameters, when the batch kernel evaluates
-    /// it: `single`, `turquin`, `kulla-conty` and `fast-msx`; `None` for the other models (the render
-    /// plan gives their multiple-bounce term to the scalar kernel).
+    /// it (the model's [`crate::bsdf::registry::Capabilities::batch`]); `None` for the other
+    /// models (the render plan gives their multiple-bounce term to the scalar kernel).
     pub fn of(model: Model, single: &'a SingleBounce<f64>) -> Option<Lobe<'a>> {
         let table = || AlbedoTable::get(single.microfacet.ndf, single.height);
-        let added = match model {
-            Model::Single => Added::None,
-            Model::Turquin => Added::Turquin(table()),
-            Model::KullaConty => Added::KullaConty(table()),
-            Model::FastMsx => Added::FastMsx,
-            _ => return None,
+        let added = match model.capabilities().batch? {
+            BatchLobe::Single => Added::None,
+            BatchLobe::Turquin => Added::Turquin(table()),
+            BatchLobe::KullaConty => Added::KullaConty(table()),
+            BatchLobe::FastMsx => Added::FastMsx,
         };
         Some(Lobe { single, added })
-    }
-
-    /// Whether the batch kernel evaluates the whole value of `model`.
-    pub fn serves(model: Model) -> bool {
-        let any = SingleBounce {
-            microfacet: Microfacet::new(NdfKind::Ggx, 0.5, 0.5),
-            fresnel: Fresnel::White,
-            height: Height::Correlated,
-        };
-        Lobe::of(model, &any).is_some()
     }
 }
 
@@ -451,7 +404,7 @@ impl BatchRecords {
         precision: Precision,
         model: Model,
     ) -> BatchRecords {
-        let indirect = model == Model::FastMsx;
+        let indirect = model.capabilities().batch == Some(BatchLobe::FastMsx);
         match precision {
             Precision::F32 => {
                 let (gathered, geometry) = gather::<f32>(records, pixels, indirect);

@@ -185,16 +185,18 @@ impl RenderPlan {
         }
     }
 
-    /// The plan of `model` (with `ndf`, `height`; `stochastic` when its value is an estimate)
-    /// over `pixels` of `records`.
+    /// The plan of `model` (with `ndf`, `height`) over `pixels` of `records`.
     pub fn new(
         skips: Skips,
-        (model, ndf, height, stochastic): (Model, NdfKind, Height, bool),
+        (model, ndf, height): (Model, NdfKind, Height),
         records: &ShadingRecords,
         pixels: &[usize],
     ) -> RenderPlan {
-        let sparse_model = !matches!(model, Model::Single | Model::Turquin);
-        let faint_model = !matches!(model, Model::Single | Model::FastMsx);
+        let capabilities = model.capabilities();
+        let stochastic = capabilities.stochastic();
+        let multi = capabilities.multi;
+        let sparse_model = multi.is_some_and(|m| m.smooth);
+        let faint_model = multi.is_some_and(|m| m.within_lost_energy);
         let anchors = (skips.sparse_multi && sparse_model)
             .then(|| Anchors::choose(records, pixels, ndf, height, SPARSE_TOLERANCE))
             .flatten();
@@ -221,8 +223,7 @@ impl RenderPlan {
         records: &ShadingRecords,
         pixels: &[usize],
     ) -> RenderPlan {
-        let stochastic = material.brdf().is_stochastic();
-        let kind = (material.model, material.ndf, material.height, stochastic);
+        let kind = (material.model, material.ndf, material.height);
         RenderPlan::new(skips, kind, records, pixels)
     }
 

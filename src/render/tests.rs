@@ -342,7 +342,8 @@ fn sparse_renders_differentiate_exactly() {
         single.microfacet.ax = alpha;
         single.microfacet.ay = alpha;
         let brdf =
-            crate::bsdf::differentiable(model, single, crate::bsdf::BounceCap::NONE).unwrap();
+            crate::bsdf::registry::differentiable(model, single, crate::bsdf::BounceCap::NONE)
+                .unwrap();
         let zero = [Dual64::from_re(0.0); 3];
         let dual = render_planned(brdf.as_ref(), &single, zero, &records, &pixels, &plan, 9);
         let h = 1e-5;

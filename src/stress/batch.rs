@@ -64,12 +64,7 @@ impl BatchReport {
     }
 }
 
-/// Whether a fit renders `model` through the batch kernel.
-pub fn serves(model: Model) -> bool {
-    Lobe::serves(model)
-}
-
-/// What the batch kernel evaluates for `model` (one it [`serves`]) at `single`'s parameters.
+/// What the batch kernel evaluates for `model` (one it serves: [`crate::bsdf::registry::Capabilities::batch`]) at `single`'s parameters.
 fn lobe(model: Model, single: &crate::bsdf::single::SingleBounce<f64>) -> Lobe<'_> {
     Lobe::of(model, single).expect("a model the batch kernel serves")
 }
@@ -146,7 +141,7 @@ impl BatchTally {
     }
 }
 
-/// Run every surface of `model`'s sweep (a model the kernel [`serves`]) through the batch
+/// Run every surface of `model`'s sweep (a model the kernel serves) through the batch
 /// kernel with lanes of `precision`; see the module doc.
 pub fn sweep(model: Model, size: SweepSize, precision: Precision) -> BatchReport {
     let pairs = pairs(size);

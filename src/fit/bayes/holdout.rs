@@ -52,10 +52,11 @@ pub fn loss_of(
     }
     let target: Vec<[f64; 3]> = pixels.iter().map(|&p| records.target[p]).collect();
     let weight: Vec<f64> = pixels.iter().map(|&p| records.weight[p]).collect();
-    let renders: Vec<Vec<[f64; 3]>> = render_seeds(material.brdf().is_stochastic(), seed)
-        .into_iter()
-        .map(|seed| render_pixels(material, records, &pixels, seed))
-        .collect();
+    let renders: Vec<Vec<[f64; 3]>> =
+        render_seeds(material.model.capabilities().stochastic(), seed)
+            .into_iter()
+            .map(|seed| render_pixels(material, records, &pixels, seed))
+            .collect();
     let layout = ImageLayout::new(records, &pixels);
     Some(Loss::new(kind, &target, &weight, &layout).renders_value(&renders))
 }

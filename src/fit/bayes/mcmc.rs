@@ -42,7 +42,6 @@ use super::posterior::{
 };
 use super::sampler::{self, Candidate, ChainState, Schedule};
 use super::target::Target;
-use crate::bsdf::Model;
 use crate::error::{Error, Result};
 use crate::fit::point::params::ParamSpace;
 use crate::fit::point::{fit_point, FitOptions, ModelFit, Optimizer, DISTINCT_LN_ALPHA};
@@ -252,7 +251,7 @@ fn prepare(
             // effective sample size 7.9, R-hat 1.50, against 647 and 1.004 from L-BFGS's
             // MAP, which stays near the start's 0.9). So the MAP keeps L-BFGS there.
             let optimizer = match options.map.optimizer {
-                Optimizer::Auto if space.model != Model::Heitz => Optimizer::Lbfgs,
+                Optimizer::Auto if space.model.capabilities().generic => Optimizer::Lbfgs,
                 chosen => chosen,
             };
             let map = FitOptions {

@@ -1,5 +1,6 @@
 //! Fits of the stochastic models that claim `heitz`'s value (`heitz`, `bitterli`, `cui`) by
-//! defect correction on the deterministic `tabulated` model (issue #16 item 2).
+//! defect correction on the deterministic `tabulated` model (issue #16 item 2): the models whose
+//! row names that surrogate ([`crate::bsdf::registry::Capabilities::surrogate`]).
 //!
 //! **Why.** Fitted directly, a stochastic model's objective is a random function: the pair
 //! loss is unbiased in value at every point, but its minimiser is not. Measured on nine 32x32
@@ -153,10 +154,7 @@ pub struct Correction {
 /// Whether `options` fit a model by defect correction.
 pub fn applies(options: &FitOptions) -> bool {
     options.stochastic_fit == StochasticFit::Corrected
-        && matches!(
-            options.space.model,
-            Model::Heitz | Model::Bitterli | Model::Cui
-        )
+        && options.space.model.capabilities().surrogate.is_some()
         && matches!(options.loss, LossKind::L2 | LossKind::RelativeL2)
 }
 
@@ -164,9 +162,13 @@ pub fn applies(options: &FitOptions) -> bool {
 pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
     let started = std::time::Instant::now();
     let model = options.space.model;
+    let surrogate_model = model
+        .capabilities()
+        .surrogate
+        .expect("a model with a surrogate");
     let surrogate = FitOptions {
         space: super::ParamSpace {
-            model: Model::Tabulated,
+            model: surrogate_model,
             ..options.space
         },
         ..options.clone()
@@ -229,7 +231,7 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
     fit.start.model = model;
     fit.evaluations = evaluations + own.evaluations.load(std::sync::atomic::Ordering::Relaxed);
     fit.correction = Some(Correction {
-        surrogate: Model::Tabulated,
+        surrogate: surrogate_model,
         walks_per_pixel: walks * records.samples_per_pixel,
         alpha_rounds,
         prediction_moves,

@@ -64,16 +64,17 @@ pub enum Optimizer {
 }
 
 impl Optimizer {
-    /// The local optimiser this choice runs for `model`. `heitz` gets Nelder-Mead: its
-    /// explicit-height walks have no pathwise derivative here, and central differences of its
-    /// walks at fixed random numbers step over the jumps where a walk changes its path (on
-    /// `heitz` photos of copper at alpha 0.8, L-BFGS with central differences stopped at
-    /// alpha 0.55 to 0.66 on failed line searches, Nelder-Mead reached 0.76).
+    /// The local optimiser this choice runs for `model`. A model whose value is not generic
+    /// over the scalar (`heitz`, [`crate::bsdf::registry::Capabilities::generic`]) gets
+    /// Nelder-Mead: its explicit-height walks have no pathwise derivative here, and central
+    /// differences of its walks at fixed random numbers step over the jumps where a walk
+    /// changes its path (on `heitz` photos of copper at alpha 0.8, L-BFGS with central
+    /// differences stopped at alpha 0.55 to 0.66 on failed line searches, Nelder-Mead reached
+    /// 0.76).
     pub fn local(self, model: Model) -> LocalOptimizer {
-        match (self, model) {
-            (Optimizer::NelderMead, _) | (Optimizer::Auto, Model::Heitz) => {
-                LocalOptimizer::NelderMead
-            }
+        match self {
+            Optimizer::NelderMead => LocalOptimizer::NelderMead,
+            Optimizer::Auto if !model.capabilities().generic => LocalOptimizer::NelderMead,
             _ => LocalOptimizer::Lbfgs,
         }
     }
@@ -100,7 +101,7 @@ pub struct FitOptions {
     /// Work the renders may skip (`--no-skip` switches skips off; see `render::plan`).
     pub skips: Skips,
     /// Arithmetic of the batch kernel's lanes (`--batch-precision`); `None`: the model's
-    /// default ([`Precision::default_for`]).
+    /// default ([`crate::bsdf::registry::Capabilities::lanes`]).
     pub precision: Option<Precision>,
     /// How `heitz`, `bitterli` and `cui` are fitted (`--stochastic-fit`, [`corrected`]).
     pub stochastic_fit: StochasticFit,
@@ -443,7 +444,7 @@ fn fit_level_on(
             .with_precision(
                 options
                     .precision
-                    .unwrap_or(Precision::default_for(space.model)),
+                    .unwrap_or(space.model.capabilities().lanes),
             );
         for result in &mut results {
             result.0 = judge.loss(&result.1) / judge.loss_from_cost(1.0);
@@ -633,7 +634,7 @@ fn objective_of<'a>(records: &'a ShadingRecords, options: &FitOptions) -> Object
         .with_precision(
             options
                 .precision
-                .unwrap_or(Precision::default_for(options.space.model)),
+                .unwrap_or(options.space.model.capabilities().lanes),
         )
 }
 

@@ -16,10 +16,10 @@
 //! variance and pull the fit towards less multiple scattering.
 
 use super::params::ParamSpace;
+use crate::bsdf::registry::{differentiable, F0Dependence};
 use crate::bsdf::single::SingleBounce;
 use crate::bsdf::tabulated::{LobeDirections, SchlickOrders, Tabulated};
 use crate::bsdf::ScalarBrdf;
-use crate::bsdf::{differentiable, BounceCap, Model};
 use crate::fit::point::params::Surface;
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::render::anchors::{Anchors, Corners};
@@ -131,10 +131,7 @@ impl<'a> Objective<'a> {
         let weight: Vec<f64> = pixels.iter().map(|&p| records.weight[p]).collect();
         let scale = loss_scale(kind, &target, &weight);
         let layout = ImageLayout::new(records, &pixels);
-        let stochastic = space
-            .material(&vec![0.0; space.dim()])
-            .brdf()
-            .is_stochastic();
+        let stochastic = space.model.capabilities().stochastic();
         let seeds = render_seeds(stochastic, seed);
         Objective {
             space,
@@ -149,7 +146,7 @@ impl<'a> Objective<'a> {
             skips: Skips::default(),
             plan: OnceLock::new(),
             batch: OnceLock::new(),
-            precision: Precision::default_for(space.model),
+            precision: space.model.capabilities().lanes,
             stochastic,
             scale,
             evaluations: Arc::new(AtomicUsize::new(0)),
@@ -218,12 +215,12 @@ impl<'a> Objective<'a> {
     pub fn plan(&self) -> &RenderPlan {
         self.plan.get_or_init(|| {
             let space = &self.space;
-            let model = (space.model, space.ndf, space.height, self.stochastic);
+            let model = (space.model, space.ndf, space.height);
             // Where the batch kernel evaluates the model's multiple-bounce term, it does so at
             // every sub-sample in less time than the anchors' scalar evaluations and their
             // interpolation take (docs/speed.md), and exactly: no anchors.
             let mut skips = self.skips;
-            skips.sparse_multi &= !Lobe::serves(space.model);
+            skips.sparse_multi &= space.model.capabilities().batch.is_none();
             RenderPlan::new(skips, model, self.records, &self.pixels)
         })
     }
@@ -389,7 +386,7 @@ impl<'a> Objective<'a> {
     /// other models and Fresnels, where the plan skips the term as faint (the prediction is
     /// then the single bounce, affine in F0), or where the space fits an exposure.
     pub fn order_parts(&self, x: &[f64]) -> Option<OrderParts<'_>> {
-        if self.space.model != Model::Tabulated || self.space.exposure {
+        if self.space.model.capabilities().f0 != F0Dependence::Orders || self.space.exposure {
             return None;
         }
         let single = self.space.material(x).single::<f64>();
@@ -464,13 +461,13 @@ impl<'a> Objective<'a> {
     /// exposure.
     pub fn compensation_parts(&self, x: &[f64]) -> Option<CompensationParts> {
         let surface = self.space.surface(x);
-        if self.space.model != Model::KullaConty || self.space.exposure {
+        if self.space.model.capabilities().f0 != F0Dependence::Compensated || self.space.exposure {
             return None;
         }
         let MultiTerm::Exact = self.plan().multi_term(&surface.single) else {
             return None;
         };
-        let lobe = Lobe::of(Model::KullaConty, &surface.single)?;
+        let lobe = Lobe::of(self.space.model, &surface.single)?;
         let batch = self.batch();
         Some(CompensationParts {
             single: batch.render_affine_in_f0(&surface.single, [0.0; 3]),
@@ -494,12 +491,7 @@ impl<'a> Objective<'a> {
         let dim = self.space.dim();
         let exact = self.gradient == GradientMethod::Exact
             && (1..=MAX_EXACT_DIM).contains(&dim)
-            && differentiable(
-                self.space.model,
-                self.space.surface(&vec![0.0; dim]).single,
-                BounceCap::NONE,
-            )
-            .is_some();
+            && self.space.model.capabilities().generic;
         if exact {
             GradientMethod::Exact
         } else {
@@ -1052,12 +1044,11 @@ impl<'a> Objective<'a> {
     /// exact derivatives (the batch kernel's tangents or dual numbers: every analytic model
     /// and `tabulated`), a squared-error loss, and at most [`MAX_EXACT_DIM`] coordinates.
     pub fn has_gauss_newton(&self) -> bool {
-        let surface = self.space.surface(&vec![0.0; self.space.dim()]).single;
         !self.stochastic
             && self.gradient == GradientMethod::Exact
             && matches!(self.kind, LossKind::L2 | LossKind::RelativeL2)
             && self.space.dim() <= MAX_EXACT_DIM
-            && differentiable(self.space.model, surface, BounceCap::NONE).is_some()
+            && self.space.model.capabilities().generic
     }
 
     /// The normalised cost at `x`, its gradient and its Gauss-Newton matrix `2 J^T V J`

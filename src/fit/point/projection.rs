@@ -18,6 +18,7 @@
 use super::objective::{interpolate, Objective, OrderParts, ORDER_PARTS};
 use super::params::{logit, sigmoid, FresnelFamily};
 use crate::bsdf::kulla_conty::KullaConty;
+use crate::bsdf::registry::F0Dependence;
 use crate::bsdf::tabulated::SchlickOrders;
 use crate::bsdf::Model;
 use crate::render::anchors::Anchors;
@@ -26,11 +27,12 @@ use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// Degree in F0 of the prediction's polynomial model (see the module docs).
+/// Degree in F0 of the prediction's polynomial model (see the module docs): the model's own
+/// where its prediction is a polynomial ([`F0Dependence::Polynomial`]), 4 for the others (the
+/// bases of `kulla-conty` and `tabulated` replace it where the objective gives their parts).
 pub fn fresnel_degree(model: Model) -> usize {
-    match model {
-        Model::Single => 1,
-        Model::FastMsx | Model::Turquin => 2,
+    match model.capabilities().f0 {
+        F0Dependence::Polynomial(degree) => degree,
         _ => 4,
     }
 }
@@ -549,10 +551,11 @@ impl<'o, 'r> Projection<'o, 'r> {
     /// polynomial). Where the plan drops the lobe as faint the prediction is the single
     /// bounce's, affine in F0, which the polynomial reproduces.
     pub fn is_exact(&self) -> bool {
-        let model = self.objective.space.model;
-        fresnel_degree(model) <= 2
-            || model == Model::KullaConty
-            || (model == Model::Tabulated && !self.objective.space.exposure)
+        match self.objective.space.model.capabilities().f0 {
+            F0Dependence::Polynomial(_) | F0Dependence::Compensated => true,
+            F0Dependence::Orders => !self.objective.space.exposure,
+            F0Dependence::PerBounce => false,
+        }
     }
 
     /// Renders made so far: the cost of the projected search in objective evaluations.

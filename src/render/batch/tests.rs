@@ -2,8 +2,9 @@
 //! dual-number derivatives of the scalar kernel, over random and grazing geometry.
 
 use super::*;
+use crate::bsdf::registry::differentiable;
 use crate::bsdf::testing::random_upper;
-use crate::bsdf::{differentiable, BounceCap};
+use crate::bsdf::BounceCap;
 use crate::microfacet::Microfacet;
 use crate::render::render_model;
 use crate::scalar::{Real, Rgb};

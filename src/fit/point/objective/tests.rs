@@ -393,7 +393,7 @@ fn batch_split_renders_equal_the_generic_render_path() {
         let material = space.material(&x);
         let plan = objective.plan();
         let summary = plan.summary(&material);
-        let whole = Lobe::serves(model);
+        let whole = model.capabilities().batch.is_some();
         assert_eq!(
             summary.anchors == 0,
             whole,
