@@ -1397,7 +1397,8 @@ fn basis_fits(
         .collect();
     clusters.assignment = label_smoothing(&costs, blocks);
     let sizes = (seen.len(), specular);
-    take_negligible_bases_texels(&mut clusters.assignment, &candidates, blocks, sizes);
+    let layout = (blocks, clusters.kinds.as_slice());
+    take_negligible_bases_texels(&mut clusters.assignment, &candidates, layout, sizes);
     texels = candidates
         .into_iter()
         .zip(&clusters.assignment)
@@ -1492,17 +1493,21 @@ const NEGLIGIBLE_SHARE: f64 = 0.01;
 /// holds under [`NEGLIGIBLE_SHARE`] of the `seen` texels, covers no area
 /// ([`covers_an_area`]), or its texels' photos do not pay for it: the sum over its texels of
 /// how much more their posterior costs (twice the negative log posterior) under the best
-/// other basis is under `(specular + 1) ln seen`, the price of its `specular` coordinates and
+/// other basis of its kind (`kinds`) is under `(specular + 1) ln seen`, the price of its
+/// `specular` coordinates and
 /// its mixing proportion in Schwarz's criterion (Schwarz 1978, "Estimating the dimension of a
 /// model", Annals of Statistics 6). The clustering's own criterion ([`clustering_bic`]) reads
 /// the texels' first estimates, where a few texels a second optimum holds (a dark rough
 /// dielectric fitted as a sharp one whose highlight no photo shows) form a tight group: in the
 /// maps zoo (`tests/maps_zoo.rs`) such bases of 2-3% of the texels gained their photos 9-35
-/// against a price of 38, and every basis of a material over 1000.
+/// against a price of 38, and every basis of a material over 1000. A basis of a kind no
+/// other basis has is a material of its own: a texel takes only the roughness of a basis of
+/// the other kind, so a metal disc beside a dielectric of nearly its roughness (0.303 and
+/// 0.325) gained nothing over it and was lost.
 fn take_negligible_bases_texels(
     labels: &mut [usize],
     candidates: &[Vec<(f64, TexelFit)>],
-    blocks: &TexelBlocks,
+    (blocks, kinds): (&TexelBlocks, &[Kind]),
     (seen, specular): (usize, usize),
 ) {
     let k = candidates.first().map_or(0, Vec::len);
@@ -1515,7 +1520,7 @@ fn take_negligible_bases_texels(
         }
         counts[label] += 1;
         let other = (0..k)
-            .filter(|&b| b != label)
+            .filter(|&b| b != label && kinds[b] == kinds[label])
             .map(|b| options[b].0)
             .fold(f64::INFINITY, f64::min);
         gains[label] += other - options[label].0;
