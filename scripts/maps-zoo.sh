@@ -9,7 +9,7 @@
 # (default docs/maps-zoo.md) even when the test fails; exits with the test's status.
 # MAPS_ZOO_SEED, MAPS_ZOO_CASES and MAPS_ZOO_SIDE override the defaults; one case is rerun
 # alone by MAPS_ZOO_SEED=<case id> MAPS_ZOO_CASES=1 (with the same MAPS_ZOO_SIDE).
-# Takes about 10 minutes on 2 cores after the release build.
+# Takes about 20 minutes on 2 cores after the release build.
 # Usage: scripts/maps-zoo.sh [OUT]
 set -euo pipefail
 out="$(realpath -m "${1:-$(dirname "$0")/../docs/maps-zoo.md}")"
