@@ -17,6 +17,7 @@ use bouncefit::maps::fit::Uncertainty;
 use bouncefit::maps::pipeline::{write_fit_images, MapsSet};
 use bouncefit::maps::render::{render_any, render_records};
 use bouncefit::maps::MaterialMaps;
+use bouncefit::progress::Reporting;
 use bouncefit::shading::ShadingRecords;
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
@@ -247,9 +248,13 @@ fn fit_uniform<'py>(
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
     let capture = args.options.real.open(&args.capture).map_err(py_error)?;
     let output = fit_file_path(args, &capture)?;
-    let options =
-        args.options
-            .pipeline_options(&args.models, &args.mcmc, &output, false, args.force);
+    let options = args.options.pipeline_options(
+        &args.models,
+        &args.mcmc,
+        &output,
+        Reporting::Off,
+        args.force,
+    );
     let done = py
         .detach(|| {
             pipeline::run(
@@ -291,7 +296,9 @@ fn fit_maps<'py>(
     let model = maps_model(args).map_err(py_error)?;
     let capture = args.options.real.open(&args.capture).map_err(py_error)?;
     let output = fit_file_path(args, &capture)?;
-    let options = args.options.maps_options(model, &args.map_options, false);
+    let options = args
+        .options
+        .maps_options(model, &args.map_options, Reporting::Off);
     let set = py
         .detach(|| {
             MapsSet::new(&args.capture, capture, options, &|warning| {

@@ -445,7 +445,7 @@ mod tests {
             gradient: Default::default(),
             max_iters: 100,
             seed: 0,
-            progress: false,
+            progress: Default::default(),
             starts: 1,
             projection: true,
             pyramid: 1,

@@ -28,7 +28,7 @@ use crate::maps::fit::check_model;
 use crate::maps::pipeline::MapsSet;
 use crate::maps::TexelGrid;
 use crate::material::Material;
-use crate::progress::Progress;
+use crate::progress::{Progress, Reporting};
 use crate::render::plan::Skips;
 use serde::Serialize;
 use std::io::Write;
@@ -394,7 +394,9 @@ pub fn run_bench(args: &BenchArgs) -> Result<()> {
                     records.photos.len()
                 );
             }
-            let mut options = args.fit.fit_options(model, !args.quiet);
+            let mut options = args
+                .fit
+                .fit_options(model, Reporting::terminal_if(!args.quiet));
             if let Some(fresnel) = set.fresnel {
                 options.space.fresnel = fresnel;
             }
@@ -496,7 +498,9 @@ fn maps_set(path: &Path, args: &BenchArgs, m: &MapsSettings) -> Result<MapsSet> 
         coarse_to_fine: CoarseToFine::default(),
     };
     // Each maps fit takes the options of the first model with its own model.
-    let options = args.fit.maps_options(m.models[0], &maps, !args.quiet);
+    let options = args
+        .fit
+        .maps_options(m.models[0], &maps, Reporting::terminal_if(!args.quiet));
     MapsSet::new(path, capture, options, &print_warning)
 }
 

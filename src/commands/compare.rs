@@ -30,6 +30,7 @@ use crate::maps::compare::MapsDifference;
 use crate::maps::fit::check_model;
 use crate::maps::pipeline::{MapsRun, MapsSet};
 use crate::maps::MaterialMaps;
+use crate::progress::Reporting;
 use crate::render::render_all;
 use crate::report::images::{residual_scale, write_model_images};
 use crate::report::maps::{
@@ -110,7 +111,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         &args.models,
         &args.mcmc,
         &args.output,
-        !args.quiet,
+        Reporting::terminal_if(!args.quiet),
         args.force,
     );
     let Some(done) = fit_photo_set(&args.capture, &capture, &options, args.quiet)? else {
@@ -263,9 +264,11 @@ fn run_maps_compare(args: &CompareArgs) -> Result<()> {
     let capture = args.options.real.open(&args.capture)?;
     let folder = StagedFolder::new(&args.output, args.force)?;
     // Each maps fit takes the options of the first model with its own model.
-    let options = args
-        .options
-        .maps_options(args.models[0], &args.maps, !args.quiet);
+    let options = args.options.maps_options(
+        args.models[0],
+        &args.maps,
+        Reporting::terminal_if(!args.quiet),
+    );
     let set = MapsSet::new(&args.capture, capture, options, &print_warning)?;
     let mut runs: Vec<MapsRun> = Vec::new();
     for &model in &args.models {

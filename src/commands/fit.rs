@@ -12,6 +12,7 @@ use crate::capture::Capture;
 use crate::error::Result;
 use crate::fit::fit_file::FitFile;
 use crate::fit::pipeline::{self, PipelineOptions, UniformRun};
+use crate::progress::Reporting;
 use std::path::Path;
 
 /// The uniform fit of the photo set at `capture_path` ([`pipeline::run`]), printing the
@@ -47,9 +48,13 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
     let capture = args.options.real.open(&args.capture)?;
     let output = args.output_path(&capture)?;
     let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
-    let options =
-        args.options
-            .pipeline_options(&args.models, &args.mcmc, &output, !args.quiet, args.force);
+    let options = args.options.pipeline_options(
+        &args.models,
+        &args.mcmc,
+        &output,
+        Reporting::terminal_if(!args.quiet),
+        args.force,
+    );
     let Some(done) = fit_photo_set(&args.capture, &capture, &options, args.quiet)? else {
         return Ok(());
     };

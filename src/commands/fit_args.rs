@@ -20,6 +20,7 @@ use crate::maps::pipeline::MapsOptions;
 use crate::maps::TexelGrid;
 use crate::material::FresnelSpec;
 use crate::microfacet::{Height, NdfKind};
+use crate::progress::Reporting;
 use crate::render::batch::Precision;
 use crate::render::plan::{Skip, Skips};
 use crate::shading::region::SampleRegion;
@@ -329,7 +330,7 @@ impl FitOptionArgs {
     }
 
     /// The library options for fitting `model`.
-    pub fn fit_options(&self, model: Model, progress: bool) -> FitOptions {
+    pub fn fit_options(&self, model: Model, progress: Reporting) -> FitOptions {
         FitOptions {
             space: self.space(model),
             optimizer: self.optimizer,
@@ -355,12 +356,12 @@ impl FitOptionArgs {
         models: &[Model],
         mcmc: &McmcArgs,
         output: &Path,
-        progress: bool,
+        progress: Reporting,
         force: bool,
     ) -> PipelineOptions {
         let candidates: Vec<FitOptions> = models
             .iter()
-            .map(|&model| self.fit_options(model, progress))
+            .map(|&model| self.fit_options(model, progress.clone()))
             .collect();
         let mcmc = match candidates.first() {
             Some(first) if mcmc.mcmc => Some(self.mcmc_options(mcmc, first.clone(), output)),
@@ -403,7 +404,7 @@ impl FitOptionArgs {
 
     /// The library options of a maps fit with these options and `maps`; `model` is the one the
     /// uniform fit options name (a maps fit of another model takes them with its own).
-    pub fn maps_options(&self, model: Model, maps: &MapsArgs, progress: bool) -> MapsOptions {
+    pub fn maps_options(&self, model: Model, maps: &MapsArgs, progress: Reporting) -> MapsOptions {
         MapsOptions {
             fit: self.fit_options(model, progress),
             region: self.real.region(),

@@ -15,6 +15,7 @@ use crate::error::{Error, Result};
 use crate::maps::fit::{HeldOutPhoto, MapsFit};
 use crate::maps::pipeline::MapsSet;
 use crate::maps::MaterialMaps;
+use crate::progress::Reporting;
 
 /// The one model a maps fit with `args` fits, refusing several models and `--mcmc`.
 pub fn maps_model(args: &FitArgs) -> Result<Model> {
@@ -40,9 +41,11 @@ pub fn run_maps_fit(args: &FitArgs) -> Result<()> {
     let output = args.output_path(&capture)?;
     let maps_folder = StagedFolder::new(&MaterialMaps::folder_beside(&output), args.force)?;
     let residual_folder = StagedFolder::new(&output.with_extension("residuals"), args.force)?;
-    let options = args
-        .options
-        .maps_options(model, &args.map_options, !args.quiet);
+    let options = args.options.maps_options(
+        model,
+        &args.map_options,
+        Reporting::terminal_if(!args.quiet),
+    );
     let set = MapsSet::new(&args.capture, capture, options, &print_warning)?;
     let mut run = set.fit(model)?;
     if !args.quiet {

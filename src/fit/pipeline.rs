@@ -17,6 +17,7 @@ use super::point::{measure, Measured};
 use super::{fit_model, FitOptions, ModelFit};
 use crate::capture::Capture;
 use crate::error::{Error, Result};
+use crate::progress::Reporting;
 use crate::shading::region::{AppliedRegion, SampleRegion};
 use crate::shading::ShadingRecords;
 use std::path::{Path, PathBuf};
@@ -320,7 +321,7 @@ fn measure_fits(
         .zip(&options.candidates)
         .map(|(fit, candidate)| {
             let quiet = FitOptions {
-                progress: false,
+                progress: Reporting::Off,
                 ..candidate.clone()
             };
             measure(records, fit, &quiet)

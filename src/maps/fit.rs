@@ -47,7 +47,7 @@ use crate::bsdf::{BounceCap, Model, ScalarBrdf};
 use crate::error::{Error, Result};
 use crate::fit::point::params::{logit, sigmoid, ParamSpace};
 use crate::material::{FresnelSpec, Material};
-use crate::progress::Progress;
+use crate::progress::Reporting;
 use crate::random::Rng;
 use crate::scalar::{Real, Rgb, Vec3};
 use crate::shading::ShadingRecords;
@@ -185,7 +185,8 @@ pub struct MapsFitOptions {
     /// The most texels the bases are chosen on: a finer grid is fitted at half the resolution
     /// (photos and texels) and refined from it ([`refine`]); `None` chooses them on `grid`.
     pub coarsest: Option<usize>,
-    pub progress: bool,
+    /// Where the stages' progress goes (a sink may stop the fit).
+    pub progress: Reporting,
 }
 
 /// A basis material: the centre of its texels' specular coordinates.
@@ -989,7 +990,7 @@ pub fn fit_maps(records: &ShadingRecords, options: &MapsFitOptions) -> Result<Ma
         anisotropic: options.anisotropic,
         ..ParamSpace::plain(options.model)
     };
-    let level = fit_level(records, options, space);
+    let level = fit_level(records, options, space)?;
     let model = TexelModel {
         space,
         normals: level.normals,
@@ -1059,7 +1060,11 @@ struct Level {
 /// The maps fit of `records` on `options.grid`: the five stages of the module table, or, on a
 /// grid of more than `options.coarsest` texels, those at half the resolution and the texels
 /// refined from them ([`refine`]).
-fn fit_level(records: &ShadingRecords, options: &MapsFitOptions, space: ParamSpace) -> Level {
+fn fit_level(
+    records: &ShadingRecords,
+    options: &MapsFitOptions,
+    space: ParamSpace,
+) -> Result<Level> {
     if let Some((coarse_records, grid)) = refine::coarser(records, options) {
         let coarse_options = MapsFitOptions {
             grid,
@@ -1069,7 +1074,7 @@ fn fit_level(records: &ShadingRecords, options: &MapsFitOptions, space: ParamSpa
             coarse_records.as_ref().unwrap_or(records),
             &coarse_options,
             space,
-        );
+        )?;
         // The refinement reads only the coarse fit: the coarse photos go before it.
         drop(coarse_records);
         return refine::refine(records, options, space, coarse, grid);
@@ -1099,13 +1104,11 @@ fn fit_level(records: &ShadingRecords, options: &MapsFitOptions, space: ParamSpa
     } else {
         0
     };
-    let mut progress = Progress::new("maps fit", (stage5 + 2) as u64);
+    let mut progress = options.progress.start("maps fit", (stage5 + 2) as u64);
     let mut step = 0u64;
     let mut tick = |what: &str| {
         step += 1;
-        if options.progress {
-            progress.update(step, || what.to_string());
-        }
+        progress.step(step, || what.to_string())
     };
 
     // Stage 5: the number of bases (and, with `--normals=auto`, whether the texels have
@@ -1117,11 +1120,11 @@ fn fit_level(records: &ShadingRecords, options: &MapsFitOptions, space: ParamSpa
         let chosen: Vec<(Vec<BasisTrial>, usize)> = candidates
             .iter()
             .map(|&normals| {
-                let trials = validated_bases(&model_with(normals), options, photo, &mut tick);
+                let trials = validated_bases(&model_with(normals), options, photo, &mut tick)?;
                 let chosen = fewest_good_bases(&trials);
-                (trials, chosen)
+                Ok((trials, chosen))
             })
-            .collect();
+            .collect::<Result<_>>()?;
         // Each family at its best number of bases: whether normals help is a question apart
         // from how many bases each needs.
         let error = |(trials, _): &(Vec<BasisTrial>, usize)| {
@@ -1145,13 +1148,13 @@ fn fit_level(records: &ShadingRecords, options: &MapsFitOptions, space: ParamSpa
     let model = model_with(normals);
     let blocks = TexelBlocks::new(records, options.grid, 1, options.held_out_photo.as_slice());
     let first = independent_texels(&model, &blocks);
-    tick("texels alone");
+    tick("texels alone")?;
     let mut fits = basis_fits(&model, &blocks, &first, bases);
     fits.texels = with_roughness_floor(fits.texels, model.roughness_dim(), roughness_floor);
     fill_unseen(&mut fits.texels, &blocks);
-    tick(&format!("{bases} bases"));
+    tick(&format!("{bases} bases"))?;
     progress.finish();
-    Level {
+    Ok(Level {
         texels: fits.texels,
         bases: fits.bases,
         labels: fits.labels,
@@ -1163,7 +1166,7 @@ fn fit_level(records: &ShadingRecords, options: &MapsFitOptions, space: ParamSpa
         normals,
         normals_trial,
         bases_grid: options.grid,
-    }
+    })
 }
 
 /// Stage 5 for one model: fitted on every photo but `photo`, on every other texel of every
@@ -1174,29 +1177,29 @@ fn validated_bases(
     model: &TexelModel,
     options: &MapsFitOptions,
     photo: usize,
-    tick: &mut impl FnMut(&str),
-) -> Vec<BasisTrial> {
+    tick: &mut impl FnMut(&str) -> Result<()>,
+) -> Result<Vec<BasisTrial>> {
     let records = model.records;
     let unseen: Vec<usize> = options.held_out_photo.into_iter().chain([photo]).collect();
     let blocks = TexelBlocks::new(records, options.grid, 2, &unseen);
     let validation = validation_pixels(records, options.grid, photo);
     let normals = if model.normals { ", normals" } else { "" };
     let first = independent_texels(model, &blocks);
-    tick(&format!("texels alone (choosing K{normals})"));
+    tick(&format!("texels alone (choosing K{normals})"))?;
     (1..=options.max_bases)
         .map(|k| {
             let fits = basis_fits(model, &blocks, &first, k);
             let floor = best_floor(model, &fits.texels, options.grid, &validation);
             let error = floor.error;
-            tick(&format!("{k} bases{normals}: validation error {error:.4}"));
-            BasisTrial {
+            tick(&format!("{k} bases{normals}: validation error {error:.4}"))?;
+            Ok(BasisTrial {
                 bases: k,
                 bases_kept: fits.bases.len(),
                 roughness_floor: floor.floor,
                 validation_error: error,
                 unfloored_validation_error: floor.unfloored_error,
                 clustering_bic: fits.clustering_bic,
-            }
+            })
         })
         .collect()
 }

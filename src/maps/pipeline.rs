@@ -193,7 +193,7 @@ impl MapsSet {
                 held_out_photo: holdout,
                 validation_photo,
                 coarsest: options.coarsest,
-                progress: uniform.progress,
+                progress: uniform.progress.clone(),
             },
         )?;
         let all: Vec<usize> = (0..records.pixel_count()).collect();

@@ -45,7 +45,6 @@ use super::target::Target;
 use crate::error::{Error, Result};
 use crate::fit::point::params::ParamSpace;
 use crate::fit::point::{fit_point, FitOptions, ModelFit, Optimizer, DISTINCT_LN_ALPHA};
-use crate::progress::Progress;
 use crate::shading::ShadingRecords;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -408,22 +407,23 @@ pub fn sample_posterior(
             None => Ok(()),
         }
     };
-    let mut progress = options
-        .map
-        .progress
-        .then(|| Progress::new("mcmc", schedule.total()));
+    let mut progress = options.map.progress.start("mcmc", schedule.total());
     let mut last_write = Instant::now();
     let mut write_error = None;
+    let mut stop = None;
     sampler::run(
         &chain_candidates,
         &mut states,
         &schedule,
         options.stop_after.unwrap_or(u64::MAX),
         |states| {
-            if let Some(p) = &mut progress {
-                let rate =
-                    states.iter().map(|s| s.step[s.model]).sum::<f64>() / states.len() as f64;
-                p.update(states[0].iterations, || format!("mean step {rate:.3}"));
+            let rate = || {
+                let mean = states.iter().map(|s| s.step[s.model]).sum::<f64>();
+                format!("mean step {:.3}", mean / states.len() as f64)
+            };
+            if let Err(e) = progress.step(states[0].iterations, rate) {
+                stop = Some(e);
+                return false;
             }
             if last_write.elapsed().as_secs_f64() >= CHECKPOINT_SECONDS {
                 last_write = Instant::now();
@@ -435,10 +435,13 @@ pub fn sample_posterior(
             true
         },
     );
-    if let Some(p) = &progress {
-        p.finish();
-    }
+    progress.finish();
     if let Some(e) = write_error {
+        return Err(e);
+    }
+    // Stopped by the progress sink: the checkpoint keeps the chains for `--resume`.
+    if let Some(e) = stop {
+        checkpoint(&states, started.elapsed().as_secs_f64())?;
         return Err(e);
     }
     let seconds = spent + started.elapsed().as_secs_f64();

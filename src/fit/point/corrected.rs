@@ -50,6 +50,7 @@ use crate::bsdf::{tabulated, Model};
 use crate::error::Result;
 use crate::loss::LossKind;
 use crate::material::Material;
+use crate::progress::Reporting;
 use crate::render::render_multi_streams;
 use crate::shading::ShadingRecords;
 use serde::{Deserialize, Serialize};
@@ -200,7 +201,13 @@ pub fn fit(records: &ShadingRecords, options: &FitOptions) -> Result<PointFit> {
             }
         }
         objective.retarget(&corrected);
-        let next = fit_level_on(&objective, records, &surrogate, Some(x.clone()), false)?;
+        let next = fit_level_on(
+            &objective,
+            records,
+            &surrogate,
+            Some(x.clone()),
+            &Reporting::Off,
+        )?;
         evaluations += next.evaluations;
         x = next.point(&surrogate.space);
         let next_prediction = objective.predict(&x);
@@ -457,7 +464,7 @@ mod tests {
             &records,
             &surrogate,
             Some(fitted.x.clone()),
-            false,
+            &Reporting::Off,
         )
         .unwrap();
         let after = objective.predict(&next.point(&surrogate.space));

@@ -233,24 +233,43 @@ pub enum LocalOptimizer {
 #[derive(Clone)]
 pub struct Recorder {
     pub trace: Arc<Mutex<Vec<TracePoint>>>,
-    progress: Option<Arc<Mutex<Progress>>>,
+    progress: Arc<Mutex<Progress>>,
     /// Iterations of the searches that already finished.
     offset: Arc<Mutex<u64>>,
 }
 
 impl Recorder {
-    pub fn new(progress: Option<Progress>) -> Self {
+    pub fn new(progress: Progress) -> Self {
         Recorder {
             trace: Arc::default(),
-            progress: progress.map(|p| Arc::new(Mutex::new(p))),
+            progress: Arc::new(Mutex::new(progress)),
             offset: Arc::default(),
         }
     }
 
+    /// Records the loss at `iteration` (counted over every search) in the trace and the
+    /// progress; an error when the progress's sink asked to stop.
+    fn record(&self, iteration: u64, evaluations: usize, loss: f64) -> Result<(), ArgminError> {
+        self.trace
+            .lock()
+            .expect("no panics while holding the lock")
+            .push(TracePoint {
+                iteration,
+                evaluations,
+                loss,
+            });
+        self.progress
+            .lock()
+            .expect("no panics while holding the lock")
+            .step(iteration, || format!("loss {loss:.4e}"))
+            .map_err(ArgminError::from)
+    }
+
     pub fn finish(&self) {
-        if let Some(p) = &self.progress {
-            p.lock().expect("no panics while holding the lock").finish();
-        }
+        self.progress
+            .lock()
+            .expect("no panics while holding the lock")
+            .finish();
     }
 }
 
@@ -265,21 +284,8 @@ impl<I: State<Float = f64>> Observe<I> for RunObserver {
     fn observe_iter(&mut self, state: &I, _kv: &KV) -> Result<(), ArgminError> {
         let loss = state.get_best_cost() * self.scale;
         let iteration = *self.recorder.offset.lock().expect("no panics") + state.get_iter();
-        self.recorder
-            .trace
-            .lock()
-            .expect("no panics while holding the lock")
-            .push(TracePoint {
-                iteration,
-                evaluations: self.evaluations.load(Ordering::Relaxed),
-                loss,
-            });
-        if let Some(p) = &self.recorder.progress {
-            p.lock()
-                .expect("no panics while holding the lock")
-                .update(iteration, || format!("loss {loss:.4e}"));
-        }
-        Ok(())
+        let evaluations = self.evaluations.load(Ordering::Relaxed);
+        self.recorder.record(iteration, evaluations, loss)
     }
 }
 
@@ -458,23 +464,10 @@ fn levenberg_marquardt(
     let offset = *recorder.offset.lock().expect("no panics");
     // The trace's points, the start first (iteration 0), as argmin's observers record them.
     let record = |iteration: u64, cost: f64| {
-        let (loss, iteration) = (cost * scale, offset + iteration);
-        recorder
-            .trace
-            .lock()
-            .expect("no panics while holding the lock")
-            .push(TracePoint {
-                iteration,
-                evaluations: objective.evaluations.load(Ordering::Relaxed),
-                loss,
-            });
-        if let Some(p) = &recorder.progress {
-            p.lock()
-                .expect("no panics while holding the lock")
-                .update(iteration, || format!("loss {loss:.4e}"));
-        }
+        let evaluations = objective.evaluations.load(Ordering::Relaxed);
+        recorder.record(offset + iteration, evaluations, cost * scale)
     };
-    record(0, at.0);
+    record(0, at.0)?;
     let mut x = x0;
     let mut damping = LM_DAMPING.0;
     let mut iterations = 0;
@@ -520,7 +513,7 @@ fn levenberg_marquardt(
         };
         (x, at) = (trial, next);
         iterations += 1;
-        record(iterations, at.0);
+        record(iterations, at.0)?;
     };
     *recorder.offset.lock().expect("no panics") += iterations;
     Ok((iterations, format!("Levenberg-Marquardt {termination}")))

@@ -30,7 +30,7 @@ use crate::error::{Error, Result};
 use crate::loss::LossKind;
 use crate::material::{FresnelSpec, Material};
 use crate::microfacet::fresnel::reflectivity_edge_tint_from_ior;
-use crate::progress::Progress;
+use crate::progress::Reporting;
 use crate::render::batch::Precision;
 use crate::render::plan::{PlanSummary, Skips};
 use crate::render::render_pixels;
@@ -90,8 +90,8 @@ pub struct FitOptions {
     pub gradient: GradientMethod,
     pub max_iters: u64,
     pub seed: u64,
-    /// Show a progress bar (or plain progress lines when stderr is not a terminal).
-    pub progress: bool,
+    /// Where the progress of the local searches goes (a sink may stop the fit).
+    pub progress: Reporting,
     /// Local searches from this many starts (the global start plus seeded random ones).
     pub starts: usize,
     /// Use variable projection for the start where the space and loss allow it.
@@ -117,7 +117,7 @@ impl FitOptions {
             gradient: GradientMethod::Exact,
             max_iters: 200,
             seed: 0,
-            progress: false,
+            progress: Reporting::Off,
             starts: 1,
             projection: true,
             pyramid: 1,
@@ -303,7 +303,7 @@ fn fit_point_on(
     let mut evaluations = 0;
     for level in coarse.iter().rev() {
         let level_started = Instant::now();
-        let fit = fit_level(level, options, start.take(), false)?;
+        let fit = fit_level(level, options, start.take(), &Reporting::Off)?;
         evaluations += fit.evaluations;
         levels.push(LevelResult {
             resolution: [level.photos[0].width, level.photos[0].height],
@@ -314,7 +314,7 @@ fn fit_point_on(
         start = Some(fit.point(&options.space));
     }
     let level_started = Instant::now();
-    let mut fit = fit_level_on(objective, records, options, start, options.progress)?;
+    let mut fit = fit_level_on(objective, records, options, start, &options.progress)?;
     if !levels.is_empty() {
         levels.push(LevelResult {
             resolution: [records.photos[0].width, records.photos[0].height],
@@ -336,7 +336,7 @@ fn fit_level(
     records: &ShadingRecords,
     options: &FitOptions,
     given_start: Option<Vec<f64>>,
-    progress: bool,
+    progress: &Reporting,
 ) -> Result<ModelFit> {
     fit_level_on(
         &objective_of(records, options),
@@ -355,7 +355,7 @@ fn fit_level_on(
     records: &ShadingRecords,
     options: &FitOptions,
     given_start: Option<Vec<f64>>,
-    progress: bool,
+    progress: &Reporting,
 ) -> Result<ModelFit> {
     let space = options.space;
     // Stochastic models: the global start is searched on one render, the local searches use
@@ -375,7 +375,11 @@ fn fit_level_on(
             "no pixel enters the loss (all masked, saturated, non-finite or outside the sample)",
         ));
     }
-    let argmin_failed = |e: ArgminError| Error::argument("optimizer", e.to_string());
+    // A library error (a progress sink's stop) passes through the solver as itself.
+    let argmin_failed = |e: ArgminError| {
+        e.downcast::<Error>()
+            .unwrap_or_else(|e| Error::argument("optimizer", e.to_string()))
+    };
     let mut projected_renders = 0;
     let (global, start_method, profile) = match given_start {
         Some(x) => (vec![x], StartMethod::Coarser, None),
@@ -413,9 +417,11 @@ fn fit_level_on(
                 .map(|x| (x, StartMethod::Random)),
         );
     }
-    let recorder = Recorder::new(
-        progress.then(|| Progress::new(&format!("fit {}", space.model), options.max_iters)),
-    );
+    // Each search counts its iterations on from the last one's, up to max_iters each.
+    let recorder = Recorder::new(progress.start(
+        &format!("fit {}", space.model),
+        options.max_iters * starts.len() as u64,
+    ));
     let local = match options.optimizer.local(space.model) {
         LocalOptimizer::Lbfgs
             if options.optimizer == Optimizer::Auto && objective.has_gauss_newton() =>

@@ -48,7 +48,7 @@ pub(super) fn refine(
     space: ParamSpace,
     coarse: Level,
     coarse_grid: TexelGrid,
-) -> Level {
+) -> Result<Level> {
     let normals = coarse.normals;
     let directions = (!normals)
         .then(|| prepared_directions(&space, false, records))
@@ -71,9 +71,9 @@ pub(super) fn refine(
             &coarse,
             coarse_grid,
             sigma2,
-            options.progress,
+            &options.progress,
             what,
-        );
+        )?;
         let seen = blocks.seen();
         let mut clusters = Clusters {
             centres: coarse.prior_centres.clone(),
@@ -83,7 +83,7 @@ pub(super) fn refine(
         clusters.drop_empty(&seen);
         clusters.recentre(&texels, &seen, model.specular_dim(), model.roughness_dim());
         settle(model, blocks, &mut texels, &mut clusters, sigma2);
-        (texels, clusters)
+        Ok::<_, Error>((texels, clusters))
     };
     // The roughness floor, chosen anew: a texel of a coarse grid averages its pixels' highlights
     // into a rougher lobe, and the floor chosen there is too rough for the finer grid.
@@ -91,17 +91,17 @@ pub(super) fn refine(
         Some(photo) if !coarse.basis_trials.is_empty() => {
             let unseen: Vec<usize> = held_out.iter().copied().chain([photo]).collect();
             let sample = TexelBlocks::new(records, grid, 2, &unseen);
-            let (texels, _) = refined(&model, &sample, "choosing the roughness floor");
+            let (texels, _) = refined(&model, &sample, "choosing the roughness floor")?;
             let validation = validation_pixels(records, grid, photo);
             best_floor(&model, &texels, grid, &validation).floor
         }
         _ => None,
     };
-    let (texels, clusters) = refined(&model, &blocks, "");
+    let (texels, clusters) = refined(&model, &blocks, "")?;
     let (bases, prior_centres) = reported_bases(&model, &blocks, &texels, &clusters, sigma2);
     let mut texels = with_roughness_floor(texels, model.roughness_dim(), roughness_floor);
     fill_unseen(&mut texels, &blocks);
-    Level {
+    Ok(Level {
         texels,
         bases,
         labels: clusters.assignment,
@@ -113,7 +113,7 @@ pub(super) fn refine(
         normals,
         normals_trial: coarse.normals_trial,
         bases_grid: coarse.bases_grid,
-    }
+    })
 }
 
 /// Every texel of `blocks` solved as [`texel_options`] says and labelled as in stage 3
@@ -125,12 +125,12 @@ fn refined_texels(
     coarse: &Level,
     coarse_grid: TexelGrid,
     sigma2: f64,
-    progress: bool,
+    progress: &Reporting,
     what: &str,
-) -> (Vec<TexelFit>, Vec<usize>) {
+) -> Result<(Vec<TexelFit>, Vec<usize>)> {
     let grid = blocks.grid;
-    let mut bar = Progress::with_rate(
-        &format!("maps {}x{} {what}", grid.width, grid.height),
+    let mut bar = progress.start_with_rate(
+        format!("maps {}x{} {what}", grid.width, grid.height).trim_end(),
         grid.len() as u64,
         "texels",
     );
@@ -160,9 +160,7 @@ fn refined_texels(
             .unzip();
         costs.extend(band_costs);
         texels.extend(band_texels);
-        if progress {
-            bar.update(last as u64, String::new);
-        }
+        bar.step(last as u64, String::new)?;
     }
     bar.finish();
     let labels = label_smoothing(&costs, blocks);
@@ -182,7 +180,7 @@ fn refined_texels(
             }
         })
         .collect();
-    (texels, labels)
+    Ok((texels, labels))
 }
 
 /// Texel `t` solved under each basis of the 3 x 3 coarse texels around the one it lies in
