@@ -15,8 +15,8 @@ call as ``bouncefit fit SET`` (:func:`bouncefit.fit`), so its fit file holds the
   skipped when the batch runs again, a failed one is fitted again;
 - ``library/<set>.gltf`` and ``library/index.json``: the material library (glTF exports and
   an index of the fitted materials);
-- ``summary.csv`` and ``summary.json``: set, status, model, alpha, F0, held-out error (maps
-  fits with ``--holdout-photo``), time, error.
+- ``summary.csv`` and ``summary.json``: set, status, model, alpha, F0, held-out error (the
+  fit file's ``holdout``: fits with ``--holdout-photo N``, uniform or maps), time, error.
 
 A set that fails is reported with its error (the command line's message) and does not stop the
 others; the exit status is 1 when any set failed.

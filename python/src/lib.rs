@@ -254,6 +254,7 @@ fn fit_uniform<'py>(
         &output,
         Reporting::Off,
         args.force,
+        args.map_options.holdout_photo,
     );
     let done = py
         .detach(|| {

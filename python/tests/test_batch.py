@@ -10,6 +10,8 @@ import sys
 from conftest import ROOT, cli, cli_error, read_fit
 
 GOOD = ["copper-flash", "aluminium-pinhole"]
+# Uniform fits with the last photo held out: the summary's held-out error is the fit file's.
+FLAGS = ["--models", "single,kulla-conty", "--", "--holdout-photo", "8"]
 
 
 def batch(*args):
@@ -25,7 +27,7 @@ def test_batch_fits_each_set_as_the_command_line_does(tmp_path, broken_set):
     shutil.move(broken_set, sets / "broken")
     out = tmp_path / "out"
 
-    done = batch(sets, "-o", out, "--workers", "2", "--models", "single,kulla-conty")
+    done = batch(sets, "-o", out, "--workers", "2", *FLAGS)
     assert done.returncode == 1, done.stderr
     rows = {r["set"]: r for r in json.loads((out / "summary.json").read_text())}
     assert sorted(rows) == ["aluminium-pinhole", "broken", "copper-flash"]
@@ -36,12 +38,13 @@ def test_batch_fits_each_set_as_the_command_line_does(tmp_path, broken_set):
     message = cli_error("fit", sets / "broken", "-o", tmp_path / "unused.json")
     assert message.strip() == f"error: {rows['broken']['error']}"
     for name in GOOD:
-        cli("fit", sets / name, "--models", "single,kulla-conty", "-o", tmp_path / f"{name}.json",
-            "--quiet")
+        cli("fit", sets / name, "--models", "single,kulla-conty", "--holdout-photo", "8",
+            "-o", tmp_path / f"{name}.json", "--quiet")
         expected = read_fit(tmp_path / f"{name}.json")
         assert read_fit(out / "fits" / f"{name}.json") == expected
         assert [rows[name]["alpha_x"], rows[name]["alpha_y"]] == expected["alpha"]
         assert rows[name]["model"] == expected["model"]
+        assert rows[name]["heldout_error"] == expected["holdout"]["relative_error"] > 0
     index = json.loads((out / "library" / "index.json").read_text())
     assert sorted(m["set"] for m in index["materials"]) == sorted(GOOD)
     for material in index["materials"]:
@@ -50,7 +53,7 @@ def test_batch_fits_each_set_as_the_command_line_does(tmp_path, broken_set):
 
     # A rerun fits only what failed: the good sets' files are left as they were.
     written = {n: (out / "fits" / f"{n}.json").stat().st_mtime_ns for n in GOOD}
-    again = batch(sets, "-o", out, "--workers", "2", "--models", "single,kulla-conty")
+    again = batch(sets, "-o", out, "--workers", "2", *FLAGS)
     assert "3 photo sets, 2 already fitted" in again.stdout
     assert {n: (out / "fits" / f"{n}.json").stat().st_mtime_ns for n in GOOD} == written
     assert "broken: failed" in again.stdout

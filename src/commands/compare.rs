@@ -98,6 +98,12 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
     if args.maps.maps {
         return run_maps_compare(args);
     }
+    if args.maps.holdout_photo.is_some() {
+        return Err(Error::argument(
+            "--holdout-photo",
+            "a uniform comparison holds photos out with --holdout K; --holdout-photo N is for --maps",
+        ));
+    }
     let capture = args.options.real.open(&args.capture)?;
     let holdout = args.holdout.map(|h| match h {
         Holdout::LeaveOneOut => capture.photos.len(),
@@ -113,6 +119,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         &args.output,
         Reporting::terminal_if(!args.quiet),
         args.force,
+        None,
     );
     let Some(done) = fit_photo_set(&args.capture, &capture, &options, args.quiet)? else {
         return Ok(());

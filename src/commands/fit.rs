@@ -54,6 +54,7 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
         &output,
         Reporting::terminal_if(!args.quiet),
         args.force,
+        args.map_options.holdout_photo,
     );
     let Some(done) = fit_photo_set(&args.capture, &capture, &options, args.quiet)? else {
         return Ok(());
@@ -71,6 +72,9 @@ pub fn run_fit(args: &FitArgs) -> Result<()> {
     let file = FitFile::of_run(&done, (&args.capture, &capture), &options);
     if let (Some(region), false) = (file.region(), args.quiet) {
         eprintln!("{}", region.summary());
+    }
+    if let (Some(holdout), false) = (&done.holdout, args.quiet) {
+        eprintln!("{}", holdout.summary());
     }
     // Residual images (prediction - photo, linear EXR; |residual| PNG at the photos' exposure),
     // from the render the fit's loss measured.

@@ -254,8 +254,8 @@ pub struct MapsArgs {
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=12))]
     pub bases: usize,
     /// Leave photo N (0-based, capture order) out of the fit and report the relative error of
-    /// its prediction in the fit file (`holdout`).
-    #[arg(long, requires = "maps")]
+    /// its prediction in the fit file (`holdout`); uniform or maps.
+    #[arg(long)]
     pub holdout_photo: Option<usize>,
     /// Choose the bases on a grid of at most N x N texels and refine the texels from it to the
     /// full grid, halving the resolution of grid and photos per level (`off`: choose them on
@@ -358,6 +358,7 @@ impl FitOptionArgs {
         output: &Path,
         progress: Reporting,
         force: bool,
+        holdout_photo: Option<usize>,
     ) -> PipelineOptions {
         let candidates: Vec<FitOptions> = models
             .iter()
@@ -373,6 +374,7 @@ impl FitOptionArgs {
             region: self.real.region(),
             mcmc,
             replace_checkpoint: force,
+            holdout_photo,
         }
     }
 

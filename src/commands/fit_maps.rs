@@ -12,7 +12,8 @@ use super::output::StagedFolder;
 use crate::bsdf::Model;
 use crate::capture::image_io::display_exposure;
 use crate::error::{Error, Result};
-use crate::maps::fit::{HeldOutPhoto, MapsFit};
+use crate::fit::bayes::holdout::HeldOutPhoto;
+use crate::maps::fit::MapsFit;
 use crate::maps::pipeline::MapsSet;
 use crate::maps::MaterialMaps;
 use crate::progress::Reporting;
@@ -95,12 +96,6 @@ fn summarise(fit: &MapsFit, holdout: Option<&HeldOutPhoto>) {
         fit.seconds
     );
     if let Some(h) = holdout {
-        eprintln!(
-            "held-out photo {}: relative error {:.4} (mean of the other photos: {})",
-            h.photo,
-            h.relative_error,
-            h.mean_photo_error
-                .map_or("n/a".into(), |e| format!("{e:.4}"))
-        );
+        eprintln!("{}", h.summary());
     }
 }

@@ -2,6 +2,7 @@
 //! the candidates beside it, and what produced it, as the JSON `fit` writes (and `compare`
 //! writes per model).
 
+use super::bayes::holdout::HeldOutPhoto;
 use super::bayes::posterior::Posterior;
 use super::bayes::selection::Selection;
 use super::pipeline::{PipelineOptions, UniformRun};
@@ -100,6 +101,9 @@ pub struct FitFile<'a> {
     posterior: Option<&'a Posterior>,
     #[serde(skip_serializing_if = "Option::is_none")]
     region: Option<RegionReport>,
+    /// The photo left out of the fit and how well the fit predicts it (`--holdout-photo`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    holdout: Option<&'a HeldOutPhoto>,
 }
 
 impl<'a> FitFile<'a> {
@@ -139,6 +143,7 @@ impl<'a> FitFile<'a> {
             selection,
             posterior,
             region: None,
+            holdout: None,
         }
     }
 
@@ -155,15 +160,18 @@ impl<'a> FitFile<'a> {
             .region
             .as_ref()
             .map(|applied| RegionReport::new(applied, &run.records, run.prediction()));
-        FitFile::new(
-            &run.fits,
-            chosen,
-            &run.selection,
-            run.posterior.as_ref().map(|r| &r.posterior),
-            capture,
-            &run.records,
-            options,
-        )
+        FitFile {
+            holdout: run.holdout.as_ref(),
+            ..FitFile::new(
+                &run.fits,
+                chosen,
+                &run.selection,
+                run.posterior.as_ref().map(|r| &r.posterior),
+                capture,
+                &run.records,
+                options,
+            )
+        }
         .with_region(region)
     }
 

@@ -11,6 +11,7 @@
 //! What it produces is written as a fit file by [`super::fit_file`]. Nothing here prints: the
 //! pipeline hands its warnings and each finished fit to its caller.
 
+use super::bayes::holdout::{check_held_out_photo, HeldOutPhoto};
 use super::bayes::mcmc::{sample_posterior, McmcOptions, PosteriorRun};
 use super::bayes::selection::{GaussianFit, Selection};
 use super::point::{measure, Measured};
@@ -18,6 +19,7 @@ use super::{fit_model, FitOptions, ModelFit};
 use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::progress::Reporting;
+use crate::render::render_pixels;
 use crate::shading::region::{AppliedRegion, SampleRegion};
 use crate::shading::ShadingRecords;
 use std::path::{Path, PathBuf};
@@ -58,6 +60,9 @@ pub struct PipelineOptions {
     /// Start the sampler afresh over a checkpoint an interrupted run left (otherwise that
     /// checkpoint is refused unless the sampler resumes it).
     pub replace_checkpoint: bool,
+    /// Leave this photo (index in capture order) out of the fits and measure how well the
+    /// chosen fit predicts it ([`UniformRun::holdout`], `fit --holdout-photo`).
+    pub holdout_photo: Option<usize>,
 }
 
 /// The photo set's shading records with targets, `pixel_samples` sub-samples per pixel,
@@ -132,6 +137,9 @@ pub struct UniformRun {
     pub measured: Vec<Measured>,
     /// The BIC ranking of the fits.
     pub selection: Selection,
+    /// How well the chosen fit predicts the photo [`PipelineOptions::holdout_photo`] left
+    /// out of the fits (the records weigh none of its pixels).
+    pub holdout: Option<HeldOutPhoto>,
     /// The sampler's checkpoint file.
     checkpoint: Option<PathBuf>,
 }
@@ -147,27 +155,50 @@ pub fn run(
     warn: &dyn Fn(&str),
     fitted: &dyn Fn(&ModelFit),
 ) -> Result<Option<UniformRun>> {
-    let (records, region) = load_records(
+    let (all, region) = load_records(
         capture_path,
         capture,
         options.pixel_samples,
         options.region.as_ref(),
         warn,
     )?;
+    check_held_out_photo(options.holdout_photo, all.photos.len())?;
+    if options.holdout_photo.is_some() && all.photos.len() < 2 {
+        return Err(Error::invalid(
+            capture_path,
+            "photos",
+            "a fit with a held-out photo needs at least one more photo to fit",
+        ));
+    }
+    // With a held-out photo, the records of every photo are kept to measure its prediction.
+    let (records, held_out) = match options.holdout_photo {
+        Some(h) => (all.restricted_to_photos(|i| i != h), Some((h, all))),
+        None => (all, None),
+    };
     let Some((fits, posterior)) = fit_and_sample(&records, options, fitted)? else {
         return Ok(None);
     };
     let measured = measure_fits(&records, &fits, options);
     let selection = select(&records, &fits, &measured, options);
-    Ok(Some(UniformRun {
+    let mut run = UniformRun {
         records,
         region,
         fits,
         posterior,
         measured,
         selection,
+        holdout: None,
         checkpoint: options.mcmc.as_ref().and_then(|m| m.checkpoint.clone()),
-    }))
+    };
+    run.holdout = held_out.map(|(h, all)| {
+        let chosen = run.chosen();
+        let fit = &run.fits[chosen];
+        let seed = options.candidates[chosen].seed;
+        HeldOutPhoto::measure(&all, h, |pixels| {
+            render_pixels(&fit.material, &fit.exposed(&all), pixels, seed)
+        })
+    });
+    Ok(Some(run))
 }
 
 impl UniformRun {
@@ -373,6 +404,7 @@ mod tests {
             region: None,
             mcmc: None,
             replace_checkpoint: false,
+            holdout_photo: None,
         };
         let fitted = std::cell::Cell::new(0);
         let warn = |w: &str| panic!("no warning expected: {w}");
@@ -386,5 +418,49 @@ mod tests {
         assert!(run.region.is_none() && run.posterior.is_none());
         assert_eq!(run.selection.preferred, Model::Single);
         assert!((run.fits[0].material.alpha[0] - 0.3).abs() < 0.01);
+    }
+
+    /// `--holdout-photo 8`: the fit is that of the set without photo 8, and its prediction of
+    /// photo 8 is measured as the maps fit measures one.
+    #[test]
+    fn a_held_out_photo_is_left_out_of_the_fit_and_predicted() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("datasets/copper-flash");
+        let capture = Capture::open(&path).unwrap();
+        let options = |holdout_photo| PipelineOptions {
+            candidates: vec![FitOptions::defaults(ParamSpace::plain(Model::Single))],
+            pixel_samples: 1,
+            region: None,
+            mcmc: None,
+            replace_checkpoint: false,
+            holdout_photo,
+        };
+        let fit = |capture: &Capture, holdout| {
+            run(&path, capture, &options(holdout), &|_| {}, &|_| {})
+                .unwrap()
+                .expect("no sampler to stop")
+        };
+        let held_out = fit(&capture, Some(8));
+        let mut eight = capture.clone();
+        eight.photos.pop();
+        let without = fit(&eight, None);
+        let (a, b) = (&held_out.fits[0], &without.fits[0]);
+        assert_eq!(a.material.alpha, b.material.alpha);
+        assert_eq!(a.f0, b.f0);
+        assert_eq!(a.loss, b.loss);
+        let report = held_out.holdout.as_ref().expect("a held-out photo");
+        assert_eq!((report.photo, report.stem.as_str()), (8, "08"));
+        // Noise-free photos of the model fitted: the unseen photo is predicted to within the
+        // sub-pixel sampling (the fit's 1 sample against the photos' own), far better than by
+        // the mean of the others.
+        assert!(report.relative_error < 0.02, "{report:?}");
+        assert!(report.mean_photo_error.unwrap() > 5.0 * report.relative_error);
+        let m = run(&path, &capture, &options(Some(9)), &|_| {}, &|_| {})
+            .err()
+            .unwrap()
+            .to_string();
+        assert_eq!(
+            m,
+            "--holdout-photo: photo 9 does not exist; the set has photos 0 to 8"
+        );
     }
 }

@@ -45,6 +45,7 @@ use crate::bsdf::tabulated::{LobeDirections, Tabulated};
 use crate::bsdf::{BounceCap, Model, ScalarBrdf};
 
 use crate::error::{Error, Result};
+use crate::fit::bayes::holdout::relative_error;
 use crate::fit::point::params::{logit, sigmoid, ParamSpace};
 use crate::material::{FresnelSpec, Material};
 use crate::progress::Reporting;
@@ -285,19 +286,6 @@ pub struct Uncertainty {
     pub specular: Option<Vec<[f32; 3]>>,
     /// The sd of the diffuse albedo per channel, from that of `logit albedo` likewise.
     pub diffuse: Vec<[f32; 3]>,
-}
-
-/// The prediction of a photo left out of a maps fit (`--holdout-photo`): the fit file's and
-/// the maps comparison's `holdout`.
-#[derive(Clone, Debug, Serialize)]
-pub struct HeldOutPhoto {
-    pub photo: usize,
-    pub stem: String,
-    /// Relative RMS error of the maps' prediction of the photo ([`relative_error`]).
-    pub relative_error: f64,
-    /// The naive baseline: the relative error of predicting it by the mean of the other photos
-    /// at each pixel (`None` when the photos differ in size).
-    pub mean_photo_error: Option<f64>,
 }
 
 /// The pixels of each texel (compressed rows): pixels with loss weight > 0, by the texel their
@@ -2675,19 +2663,6 @@ fn texel_relative_error(
         for c in 0..3 {
             error += (p[c] - t[c]).powi(2);
             signal += t[c] * t[c];
-        }
-    }
-    (error / signal.max(1e-300)).sqrt()
-}
-
-/// `sqrt(sum w (p - t)^2 / sum w t^2)` over `pixels`.
-pub fn relative_error(predicted: &[[f64; 3]], records: &ShadingRecords, pixels: &[usize]) -> f64 {
-    let (mut error, mut signal) = (0.0, 0.0);
-    for (value, &p) in predicted.iter().zip(pixels) {
-        let w = records.weight[p];
-        for (v, t) in value.iter().zip(records.target[p]) {
-            error += w * (v - t).powi(2);
-            signal += w * t * t;
         }
     }
     (error / signal.max(1e-300)).sqrt()

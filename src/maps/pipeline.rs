@@ -4,20 +4,19 @@
 //! ([`super::fit::fit_maps`]) to every photo but the held-out one and predicts every photo;
 //! [`MapsSet::fit_file_fields`] are what the maps fit file adds to the maps. Nothing here prints.
 
-use super::fit::{
-    fit_maps, relative_error, HeldOutPhoto, MapsFit, MapsFitOptions, Normals, Uncertainty,
-};
+use super::fit::{fit_maps, MapsFit, MapsFitOptions, Normals, Uncertainty};
 use super::render::render_maps;
 use super::{MaterialMaps, TexelGrid};
 use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
+use crate::fit::bayes::holdout::{check_held_out_photo, HeldOutPhoto};
 use crate::fit::pipeline::{load_records, RegionSource};
 use crate::fit::point::exposure::exposed_records;
 use crate::fit::point::params::{FresnelFamily, ParamSpace};
 use crate::fit::{fit_model, FitOptions};
 use crate::loss::LossKind;
-use crate::shading::{PhotoSpan, ShadingRecords};
+use crate::shading::ShadingRecords;
 use serde_json::json;
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
@@ -134,15 +133,7 @@ impl MapsSet {
             warn,
         )?;
         let photos = records.photos.len();
-        if let Some(h) = options.holdout_photo.filter(|&h| h >= photos) {
-            return Err(Error::argument(
-                "--holdout-photo",
-                format!(
-                    "photo {h} does not exist; the set has photos 0 to {}",
-                    photos - 1
-                ),
-            ));
-        }
+        check_held_out_photo(options.holdout_photo, photos)?;
         if photos < 2 + usize::from(options.holdout_photo.is_some()) {
             return Err(Error::invalid(
                 capture_path,
@@ -199,17 +190,9 @@ impl MapsSet {
         let all: Vec<usize> = (0..records.pixel_count()).collect();
         let predicted = render_maps(&fit.maps, &records, &all, uniform.seed)?;
         let holdout = holdout.map(|h| {
-            let pixels: Vec<usize> = records.photos[h]
-                .pixels()
-                .filter(|&p| records.weight[p] > 0.0)
-                .collect();
-            let values: Vec<[f64; 3]> = pixels.iter().map(|&p| predicted[p]).collect();
-            HeldOutPhoto {
-                photo: h,
-                stem: records.photos[h].stem.clone(),
-                relative_error: relative_error(&values, &records, &pixels),
-                mean_photo_error: mean_photo_error(&records, h),
-            }
+            HeldOutPhoto::measure(&records, h, |pixels| {
+                pixels.iter().map(|&p| predicted[p]).collect()
+            })
         });
         Ok(MapsRun {
             model,
@@ -295,42 +278,4 @@ pub fn write_fit_images(
         uncertainty.write_images(folder, &prefix)?,
     );
     Ok((entry, fields))
-}
-
-/// The naive baseline of a held-out photo: the relative error of predicting it by the mean of
-/// the other photos at the same pixel (rectified photos of one size; `null` otherwise), over
-/// the pixels usable in all of them.
-fn mean_photo_error(records: &ShadingRecords, held_out: usize) -> Option<f64> {
-    let span = &records.photos[held_out];
-    let others: Vec<&PhotoSpan> = (0..records.photos.len())
-        .filter(|&i| i != held_out)
-        .map(|i| &records.photos[i])
-        .collect();
-    if others
-        .iter()
-        .any(|o| (o.width, o.height) != (span.width, span.height))
-    {
-        return None;
-    }
-    let (mut error, mut signal) = (0.0, 0.0);
-    for i in 0..span.width * span.height {
-        let p = span.first_pixel + i;
-        if records.weight[p] == 0.0
-            || others
-                .iter()
-                .any(|o| records.weight[o.first_pixel + i] == 0.0)
-        {
-            continue;
-        }
-        for c in 0..3 {
-            let mean = others
-                .iter()
-                .map(|o| records.target[o.first_pixel + i][c])
-                .sum::<f64>()
-                / others.len() as f64;
-            error += (mean - records.target[p][c]).powi(2);
-            signal += records.target[p][c].powi(2);
-        }
-    }
-    (signal > 0.0).then(|| (error / signal).sqrt())
 }

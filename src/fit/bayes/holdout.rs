@@ -6,6 +6,7 @@
 //! | folds | photo `i` (capture order) is held out in fold `i mod K`; `2 <= K <= photos` |
 //! | training | the model is refitted on the records with the held-out photos' weights set to 0 ([`ShadingRecords::restricted_to_photos`]), same options and seed |
 //! | prediction | the fitted material is rendered on the held-out photos' pixels and scored with the fit's loss (its own normalisation over those pixels) |
+//! | one photo (`fit --holdout-photo N`, uniform or maps) | the fit leaves photo N out; its prediction's relative RMS error ([`relative_error`]) beside that of the mean of the other photos ([`HeldOutPhoto`]) |
 //!
 //! A model with more freedom lowers the training loss but gains on held-out photos only if it
 //! describes the material better, so held-out error is a ranking that needs no noise model
@@ -17,7 +18,8 @@ use crate::fit::point::{fit_point, FitOptions};
 use crate::loss::{ImageLayout, Loss, LossKind};
 use crate::material::Material;
 use crate::render::render_pixels;
-use crate::shading::ShadingRecords;
+use crate::shading::{PhotoSpan, ShadingRecords};
+use serde::Serialize;
 
 /// The fold in which photo `photo` is held out.
 pub fn fold_of(photo: usize, folds: usize) -> usize {
@@ -98,6 +100,116 @@ pub fn cross_validate(
             })
         })
         .collect()
+}
+
+/// Checks `--holdout-photo` against the number of photos.
+pub fn check_held_out_photo(photo: Option<usize>, photos: usize) -> Result<()> {
+    match photo {
+        Some(h) if h >= photos => Err(Error::argument(
+            "--holdout-photo",
+            format!(
+                "photo {h} does not exist; the set has photos 0 to {}",
+                photos - 1
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// The prediction of a photo left out of a fit (`--holdout-photo`, uniform or maps): the fit
+/// file's and the maps comparison's `holdout`.
+#[derive(Clone, Debug, Serialize)]
+pub struct HeldOutPhoto {
+    pub photo: usize,
+    pub stem: String,
+    /// Relative RMS error of the fit's prediction of the photo ([`relative_error`]).
+    pub relative_error: f64,
+    /// The naive baseline: the relative error of predicting it by the mean of the other photos
+    /// at each pixel (`None` when the photos differ in size).
+    pub mean_photo_error: Option<f64>,
+}
+
+impl HeldOutPhoto {
+    /// How well `predict` (the values of pixels of `records`, a fit's prediction) predicts
+    /// photo `photo`, which the fit did not see, at its pixels that `records` weigh.
+    pub fn measure(
+        records: &ShadingRecords,
+        photo: usize,
+        predict: impl FnOnce(&[usize]) -> Vec<[f64; 3]>,
+    ) -> HeldOutPhoto {
+        let pixels: Vec<usize> = records.photos[photo]
+            .pixels()
+            .filter(|&p| records.weight[p] > 0.0)
+            .collect();
+        HeldOutPhoto {
+            photo,
+            stem: records.photos[photo].stem.clone(),
+            relative_error: relative_error(&predict(&pixels), records, &pixels),
+            mean_photo_error: mean_photo_error(records, photo),
+        }
+    }
+
+    /// One line for the user.
+    pub fn summary(&self) -> String {
+        format!(
+            "held-out photo {}: relative error {:.4} (mean of the other photos: {})",
+            self.photo,
+            self.relative_error,
+            self.mean_photo_error
+                .map_or("n/a".into(), |e| format!("{e:.4}"))
+        )
+    }
+}
+
+/// `sqrt(sum w (p - t)^2 / sum w t^2)` over `pixels`.
+pub fn relative_error(predicted: &[[f64; 3]], records: &ShadingRecords, pixels: &[usize]) -> f64 {
+    let (mut error, mut signal) = (0.0, 0.0);
+    for (value, &p) in predicted.iter().zip(pixels) {
+        let w = records.weight[p];
+        for (v, t) in value.iter().zip(records.target[p]) {
+            error += w * (v - t).powi(2);
+            signal += w * t * t;
+        }
+    }
+    (error / signal.max(1e-300)).sqrt()
+}
+
+/// The naive baseline of a held-out photo: the relative error of predicting it by the mean of
+/// the other photos at the same pixel (rectified photos of one size; `null` otherwise), over
+/// the pixels usable in all of them.
+fn mean_photo_error(records: &ShadingRecords, held_out: usize) -> Option<f64> {
+    let span = &records.photos[held_out];
+    let others: Vec<&PhotoSpan> = (0..records.photos.len())
+        .filter(|&i| i != held_out)
+        .map(|i| &records.photos[i])
+        .collect();
+    if others
+        .iter()
+        .any(|o| (o.width, o.height) != (span.width, span.height))
+    {
+        return None;
+    }
+    let (mut error, mut signal) = (0.0, 0.0);
+    for i in 0..span.width * span.height {
+        let p = span.first_pixel + i;
+        if records.weight[p] == 0.0
+            || others
+                .iter()
+                .any(|o| records.weight[o.first_pixel + i] == 0.0)
+        {
+            continue;
+        }
+        for c in 0..3 {
+            let mean = others
+                .iter()
+                .map(|o| records.target[o.first_pixel + i][c])
+                .sum::<f64>()
+                / others.len() as f64;
+            error += (mean - records.target[p][c]).powi(2);
+            signal += records.target[p][c].powi(2);
+        }
+    }
+    (signal > 0.0).then(|| (error / signal).sqrt())
 }
 
 #[cfg(test)]
