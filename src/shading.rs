@@ -17,6 +17,8 @@ pub mod region;
 
 use glam::DVec3;
 use rayon::prelude::*;
+use std::borrow::Cow;
+use std::path::PathBuf;
 
 use crate::capture::image_io::{load_image, load_mask};
 use crate::capture::{Capture, Photo};
@@ -287,11 +289,18 @@ impl ShadingRecords {
         self.excluded.outside_sample += self.weight[pixels].iter().filter(|&&w| w == 0.0).count();
     }
 
-    /// Loads photo `index`'s image and masks into its pixels' targets and weights.
+    /// Loads photo `index`'s image and masks (or takes them from memory) into its pixels'
+    /// targets and weights.
     fn add_targets(&mut self, capture: &Capture, index: usize, span: &PhotoSpan) -> Result<()> {
         let photo = &capture.photos[index];
-        let path = capture.path_of(&photo.image);
-        let image = load_image(&path, photo.color)?;
+        let (path, image) = match &photo.pixels {
+            Some(pixels) => (PathBuf::from(&pixels.name), Cow::Borrowed(&pixels.image)),
+            None => {
+                let path = capture.path_of(&photo.image);
+                let image = load_image(&path, photo.color)?;
+                (path, Cow::Owned(image))
+            }
+        };
         if (image.width, image.height) != (span.width, span.height) {
             return Err(Error::invalid(
                 &path,
@@ -302,12 +311,15 @@ impl ShadingRecords {
                 ),
             ));
         }
-        let load = |mask: &Option<std::path::PathBuf>| {
+        let load = |mask: &Option<PathBuf>| {
             mask.as_ref()
                 .map(|m| load_mask(&capture.path_of(m), span.width, span.height))
                 .transpose()
         };
-        let keep = load(&photo.mask)?;
+        let keep = match &photo.pixels {
+            Some(pixels) => pixels.keep.clone(),
+            None => load(&photo.mask)?,
+        };
         let saturated_mask = load(&photo.saturated_mask)?;
         let pixels = span.pixels();
         let mut counts = ExclusionCounts::default();
@@ -376,6 +388,7 @@ mod tests {
             mask: None,
             saturated_mask: None,
             color: ColorEncoding::default_for(Path::new(image)),
+            pixels: None,
         }
     }
 
@@ -745,6 +758,55 @@ mod tests {
         assert_eq!(
             (r.target[17], r.target[18], r.target[12]),
             ([0.0; 3], [0.0; 3], [0.5; 3])
+        );
+    }
+
+    #[test]
+    fn pixels_in_memory_give_the_records_of_their_image_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut hdr = vec![[0.5f32; 3]; 12];
+        hdr[5] = [f32::NAN, 0.0, 0.0];
+        hdr[7] = [0.25, 2.0, 0.5];
+        write_exr(&dir.path().join("h.exr"), &hdr, 4, 3).unwrap();
+        let mut c = png_capture(dir.path(), &[1; 12]);
+        (c.photos[0].image, c.photos[0].color) = (PathBuf::from("h.exr"), ColorEncoding::Linear);
+        let from_file = ShadingRecords::build(&c, 4, true).unwrap();
+        let image = load_image(&dir.path().join("h.exr"), ColorEncoding::Linear).unwrap();
+        let in_memory = |keep: Option<Vec<bool>>| {
+            let mut c = c.clone();
+            c.photos[0].image = PathBuf::from("not-a-file");
+            c.photos[0].pixels = Some(std::sync::Arc::new(crate::capture::InMemoryPhoto {
+                name: "images[0]".into(),
+                image: image.clone(),
+                keep,
+            }));
+            ShadingRecords::build(&c, 4, true)
+        };
+        let same = in_memory(None).unwrap();
+        assert_eq!(same.target, from_file.target);
+        assert_eq!(same.weight, from_file.weight);
+        assert_eq!(same.excluded, from_file.excluded);
+        assert_eq!(
+            (same.wi, same.irradiance),
+            (from_file.wi, from_file.irradiance)
+        );
+        // A keep-mask in memory leaves its pixels out, as a mask image does.
+        let mut keep = vec![true; 12];
+        keep[0] = false;
+        let masked = in_memory(Some(keep)).unwrap();
+        assert_eq!((masked.weight[0], masked.excluded.masked), (0.0, 1));
+        // A wrong size names the pixels in memory.
+        let mut c = c.clone();
+        c.photos[0].camera = rectified(DVec3::new(0.0, 0.0, 5.0), [4, 4]);
+        c.photos[0].pixels = Some(std::sync::Arc::new(crate::capture::InMemoryPhoto {
+            name: "images[0]".into(),
+            image,
+            keep: None,
+        }));
+        let m = ShadingRecords::build(&c, 1, true).unwrap_err().to_string();
+        assert!(
+            m.starts_with("images[0]: resolution: the image is 4x3"),
+            "{m}"
         );
     }
 

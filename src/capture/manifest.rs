@@ -411,6 +411,7 @@ fn read_photo(
         mask,
         saturated_mask,
         color,
+        pixels: None,
     })
 }
 
@@ -433,6 +434,12 @@ pub(super) fn read(manifest: &Path) -> Result<Capture> {
         );
         Error::invalid(manifest, line, e.message())
     })?;
+    from_table(manifest, absolute_folder(folder_of(manifest))?, entries)
+}
+
+/// Validates a manifest's tables `entries` (errors and warnings name `manifest` and the
+/// field); relative image and mask paths are against `root`.
+pub(super) fn from_table(manifest: &Path, root: PathBuf, entries: toml::Table) -> Result<Capture> {
     let mut warnings = Vec::new();
     let mut top = Table {
         manifest,
@@ -474,7 +481,6 @@ pub(super) fn read(manifest: &Path) -> Result<Capture> {
             ));
         }
     }
-    let root = absolute_folder(folder_of(manifest))?;
     Ok(Capture {
         name,
         units,
@@ -558,6 +564,16 @@ pub(super) fn write(capture: &Capture, path: &Path) -> Result<()> {
         .iter()
         .enumerate()
         .map(|(i, p)| {
+            if let Some(pixels) = &p.pixels {
+                return Err(Error::invalid(
+                    path,
+                    format!("photo[{i}].image"),
+                    format!(
+                        "{} is held in memory; write it to an image file first",
+                        pixels.name
+                    ),
+                ));
+            }
             let optional_path = |file: &Option<PathBuf>, key: &str| {
                 file.as_deref()
                     .map(|f| path_text(f, format!("photo[{i}].{key}")))
@@ -648,6 +664,70 @@ exposure = 1.0
     fn example_with(from: &str, to: &str) -> String {
         assert!(DESIGN_EXAMPLE.contains(from), "{from}");
         DESIGN_EXAMPLE.replacen(from, to, 1)
+    }
+
+    /// What `Capture::from_tables` makes of `text`'s tables, each photo's pixels in memory.
+    fn from_tables(text: &str) -> Result<Capture> {
+        let table: toml::Table = toml::from_str(text).unwrap();
+        let photos = table["photo"].as_array().unwrap().len();
+        let pixels = (0..photos)
+            .map(|i| crate::capture::InMemoryPhoto {
+                name: format!("images[{i}]"),
+                image: crate::capture::LinearImage {
+                    width: 1,
+                    height: 1,
+                    rgb: vec![[0.5; 3]],
+                    saturated: vec![false],
+                },
+                keep: None,
+            })
+            .collect();
+        Capture::from_tables(Path::new("arrays"), table, pixels)
+    }
+
+    #[test]
+    fn tables_in_memory_are_read_and_checked_as_the_manifest() {
+        let text = rich_capture_text();
+        let (from_file, in_memory) = (open_text(&text).unwrap(), from_tables(&text).unwrap());
+        assert_eq!(in_memory.root, std::path::absolute(".").unwrap());
+        assert_eq!(in_memory.photos.len(), from_file.photos.len());
+        for (a, b) in in_memory.photos.iter().zip(&from_file.photos) {
+            assert!(a.pixels.is_some());
+            assert_eq!(
+                Photo {
+                    pixels: None,
+                    ..a.clone()
+                },
+                *b
+            );
+        }
+        // The same checks and messages, naming the source given in place of the manifest.
+        for (from, to) in [
+            ("[0.0, 0.0, 30.0], intensity", "[0.0, 0.0, -1.0], intensity"),
+            ("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, -2.0]"),
+            ("kind = \"point\"", "kind = \"spot\""),
+        ] {
+            let text = example_with(from, to);
+            let (_dir, path) = write_manifest(&text);
+            let expected = Capture::open(&path).unwrap_err().to_string();
+            let expected = expected.replacen(&path.display().to_string(), "arrays", 1);
+            assert_eq!(from_tables(&text).unwrap_err().to_string(), expected);
+        }
+        // Pixels held in memory are not written as a manifest's images.
+        let m = in_memory_save_error(&text);
+        assert!(
+            m.contains("photo[0].image: images[0] is held in memory"),
+            "{m}"
+        );
+    }
+
+    fn in_memory_save_error(text: &str) -> String {
+        let dir = tempfile::tempdir().unwrap();
+        let capture = from_tables(text).unwrap();
+        capture
+            .save_manifest(&dir.path().join(MANIFEST_NAME))
+            .unwrap_err()
+            .to_string()
     }
 
     #[test]

@@ -92,6 +92,7 @@ pub fn import(folder: &Path, image_folder: Option<&str>) -> Result<Capture> {
                     .then_some(saturated_mask),
                 color: ENCODING,
                 image,
+                pixels: None,
             })
         })
         .collect::<Result<Vec<Photo>>>()?;

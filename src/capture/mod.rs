@@ -16,6 +16,7 @@ pub mod materialgan_writer;
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use glam::DVec3;
 
@@ -68,6 +69,20 @@ pub struct Photo {
     /// How the image's values encode linear radiance: the photo's `color`, else the manifest's
     /// `color`, else the file type's default ([`ColorEncoding::default_for`]).
     pub color: ColorEncoding,
+    /// The image (and keep-mask) held in memory instead of read from `image` and `mask`
+    /// ([`Capture::from_tables`]); `image` then only names the photo (its stem).
+    pub pixels: Option<Arc<InMemoryPhoto>>,
+}
+
+/// A photo's pixels given in memory (the Python package's arrays).
+#[derive(Clone, Debug, PartialEq)]
+pub struct InMemoryPhoto {
+    /// What errors about these pixels name in place of a file (`images[3]`).
+    pub name: String,
+    /// Linear RGB, as [`image_io::load_image`] decodes a file.
+    pub image: LinearImage,
+    /// Per pixel: false leaves it out of the fit (zero in a keep-mask image); `None`: keep all.
+    pub keep: Option<Vec<bool>>,
 }
 
 impl Photo {
@@ -136,6 +151,33 @@ impl Capture {
                 ),
             )),
         }
+    }
+
+    /// A photo set from a manifest's tables `entries` (what `capture.toml` holds: `name`,
+    /// `units`, `[sample]`, `[camera]`, `[[photo]]` with `light`, `exposure`, `camera`, ...)
+    /// and each photo's `pixels` in photo order, in place of image files. Checked, defaulted
+    /// and reported as a manifest is ([`Capture::open`]); errors name `source` and the field.
+    pub fn from_tables(
+        source: &Path,
+        entries: toml::Table,
+        pixels: Vec<InMemoryPhoto>,
+    ) -> Result<Capture> {
+        let mut capture = manifest::from_table(source, absolute_folder(Path::new("."))?, entries)?;
+        if capture.photos.len() != pixels.len() {
+            return Err(Error::invalid(
+                source,
+                "photo",
+                format!(
+                    "{} photos but {} images; expected one image per photo",
+                    capture.photos.len(),
+                    pixels.len()
+                ),
+            ));
+        }
+        for (photo, pixels) in capture.photos.iter_mut().zip(pixels) {
+            photo.pixels = Some(Arc::new(pixels));
+        }
+        Ok(capture)
     }
 
     /// Writes the manifest atomically, such that [`Capture::open`] reads back an equal capture

@@ -315,6 +315,7 @@ fn write_photo_set(
             mask,
             saturated_mask,
             color: ColorEncoding::Linear,
+            pixels: None,
         });
     }
     let capture = Capture {

@@ -173,11 +173,15 @@ fn parse_region(text: &str) -> std::result::Result<SampleRegion, String> {
 impl RealCaptureArgs {
     /// Opens the photo set (printing its warnings) with `--depth` applied.
     pub fn open(&self, path: &Path) -> Result<Capture> {
-        let mut capture = super::inputs::open_capture(path)?;
+        Ok(self.applied_to(super::inputs::open_capture(path)?))
+    }
+
+    /// `capture` with `--depth` applied.
+    pub fn applied_to(&self, mut capture: Capture) -> Capture {
         if let Some(depth) = self.depth {
             capture.depth = depth;
         }
-        Ok(capture)
+        capture
     }
 
     /// The region of `--region` or `--mask`, if any.

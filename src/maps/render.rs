@@ -111,6 +111,7 @@ mod tests {
                 mask: None,
                 saturated_mask: None,
                 color: ColorEncoding::Linear,
+                pixels: None,
             })
             .collect();
         Capture {
