@@ -12,3 +12,7 @@ class InvalidInputError(BouncefitError, ValueError):
 
 class FileError(BouncefitError, OSError):
     """A file could not be read or written (missing, unreadable, not writable)."""
+
+
+class BouncefitWarning(UserWarning):
+    """Something worth telling that is not an error (the command line's ``warning:`` lines)."""

@@ -4,7 +4,7 @@
 //! plain objects. Long work runs with the GIL released.
 
 use bouncefit::capture::atomic_file::write_atomically;
-use bouncefit::capture::Capture;
+use bouncefit::capture::{Capture, InMemoryPhoto, LinearImage};
 use bouncefit::commands::compare::{run_compare, CompareArgs};
 use bouncefit::commands::export::{run_export, ExportArgs};
 use bouncefit::commands::fit_args::{FitArgs, RealCaptureArgs};
@@ -17,13 +17,14 @@ use bouncefit::maps::fit::Uncertainty;
 use bouncefit::maps::pipeline::{write_fit_images, MapsSet};
 use bouncefit::maps::render::{render_any, render_records};
 use bouncefit::maps::MaterialMaps;
-use bouncefit::progress::Reporting;
+use bouncefit::progress::{ProgressSink, Reporting};
 use bouncefit::shading::ShadingRecords;
-use numpy::{PyArray1, PyArrayMethods};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use std::ffi::CString;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// A library error as the exception of `bouncefit.errors` its kind maps to, with the message
 /// the command line prints after `error: `.
@@ -63,40 +64,77 @@ fn clap_error(err: clap::Error) -> PyErr {
     raise("InvalidInputError", message)
 }
 
-/// Calls the Python progress callback `(stage, message)`; the first exception it raises is
-/// kept and raised when the work is done (the pipeline cannot be stopped half-way).
+/// The Python progress callback `progress(stage, done, total, message)` as the library's
+/// progress sink, and the library's warnings as Python warnings (`BouncefitWarning`). The
+/// first exception either raises stops the work and is raised in place of its result.
 struct Callback {
     function: Option<Py<PyAny>>,
     failure: Mutex<Option<PyErr>>,
 }
 
 impl Callback {
-    fn new(function: Option<Py<PyAny>>) -> Self {
-        Callback {
+    fn new(function: Option<Py<PyAny>>) -> Arc<Self> {
+        Arc::new(Callback {
             function,
             failure: Mutex::new(None),
+        })
+    }
+
+    /// Where the library's progress goes: to the callback, if there is one.
+    fn reporting(self: &Arc<Self>) -> Reporting {
+        match self.function {
+            Some(_) => Reporting::Sink(self.clone()),
+            None => Reporting::Off,
         }
     }
 
-    fn call(&self, stage: &str, message: &str) {
+    /// Keeps the first exception; `false` from then on.
+    fn outcome(&self, result: PyResult<()>) -> bool {
+        let mut failure = self.failure.lock().expect("no panic holds the lock");
+        if let Err(err) = result {
+            failure.get_or_insert(err);
+        }
+        failure.is_none()
+    }
+
+    /// Calls the callback (with the GIL); `false` once it or a warning has raised.
+    fn call(&self, stage: &str, done: u64, total: u64, message: &str) -> bool {
         let Some(function) = &self.function else {
-            return;
+            return self.outcome(Ok(()));
         };
-        Python::attach(|py| {
-            if let Err(err) = function.call1(py, (stage, message)) {
-                self.failure
-                    .lock()
-                    .expect("no panic holds the lock")
-                    .get_or_insert(err);
-            }
+        if !self.outcome(Ok(())) {
+            return false;
+        }
+        let result = Python::attach(|py| {
+            function
+                .call1(py, (stage, done, total, message))
+                .map(|_| ())
         });
+        self.outcome(result)
     }
 
-    fn finish(self) -> PyResult<()> {
-        match self.failure.into_inner().expect("no panic holds the lock") {
+    /// Issues `message` as a `bouncefit.BouncefitWarning`.
+    fn warn(&self, message: &str) {
+        let result = Python::attach(|py| {
+            let category = py.import("bouncefit.errors")?.getattr("BouncefitWarning")?;
+            let text = CString::new(message.replace('\0', " ")).expect("no NUL left");
+            PyErr::warn(py, &category, &text, 1)
+        });
+        self.outcome(result);
+    }
+
+    /// The work's `result`, or the exception the callback or a warning raised, which stopped it.
+    fn result<T>(&self, result: Result<T, Error>) -> PyResult<T> {
+        match self.failure.lock().expect("no panic holds the lock").take() {
             Some(err) => Err(err),
-            None => Ok(()),
+            None => result.map_err(py_error),
         }
+    }
+}
+
+impl ProgressSink for Callback {
+    fn update(&self, stage: &str, done: u64, total: u64, message: &str) -> bool {
+        self.call(stage, done, total, message)
     }
 }
 
@@ -138,27 +176,32 @@ fn stems(records: &ShadingRecords) -> Vec<String> {
     records.photos.iter().map(|p| p.stem.clone()).collect()
 }
 
-/// The capture at `path` with `--depth` applied, as `fit` opens it.
-fn open_capture(path: &Path, depth: Option<f64>) -> PyResult<Capture> {
-    let real = RealCaptureArgs {
+/// `--depth` alone, as `load` and `render` take it.
+fn real_capture_args(depth: Option<f64>) -> RealCaptureArgs {
+    RealCaptureArgs {
         fit_exposure: false,
         fresnel_known: None,
         depth,
         region: None,
         mask: None,
-    };
-    real.open(path).map_err(py_error)
+    }
 }
 
-/// A photo set: its name, photos and the linear images the fits see.
-#[pyfunction]
-#[pyo3(signature = (path, depth=None))]
-fn load_photo_set<'py>(
+/// A photo set held in memory (`PhotoSet.from_arrays`): what the fits open in place of a
+/// path.
+#[pyclass(frozen, module = "bouncefit._native")]
+struct Photos {
+    capture: Capture,
+}
+
+/// The photo set `capture` (opened from `path`, or `photos` in memory) as `PhotoSet`'s
+/// fields: its name, photos and the linear images the fits see.
+fn photo_set<'py>(
     py: Python<'py>,
-    path: PathBuf,
-    depth: Option<f64>,
+    path: Option<PathBuf>,
+    capture: Capture,
+    in_memory: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let capture = open_capture(&path, depth)?;
     let records = py
         .detach(|| ShadingRecords::build(&capture, 1, true))
         .map_err(py_error)?;
@@ -170,7 +213,96 @@ fn load_photo_set<'py>(
     out.set_item("depth", capture.depth)?;
     out.set_item("photos", stems(&records))?;
     out.set_item("images", photo_arrays(py, &records, &records.target)?)?;
+    out.set_item("warnings", &capture.warnings)?;
+    let handle = in_memory.then(|| Photos { capture });
+    out.set_item("native", handle)?;
     Ok(out)
+}
+
+/// A photo set: its name, photos and the linear images the fits see.
+#[pyfunction]
+#[pyo3(signature = (path, depth=None))]
+fn load_photo_set<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    depth: Option<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let capture = real_capture_args(depth).open(&path).map_err(py_error)?;
+    photo_set(py, Some(path), capture, false)
+}
+
+/// A photo set from the tables of a manifest (`manifest`: JSON text of what `capture.toml`
+/// holds, each photo's `image` its stem) and per photo its linear `(h, w, 3)` image and
+/// optional `(h, w)` keep-mask, checked by the manifest reader; errors name `source`.
+#[pyfunction]
+#[pyo3(signature = (source, manifest, images, masks))]
+fn photo_set_from_arrays<'py>(
+    py: Python<'py>,
+    source: PathBuf,
+    manifest: &str,
+    images: Vec<PyReadonlyArray3<'py, f32>>,
+    masks: Vec<Option<PyReadonlyArray2<'py, bool>>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let entries: toml::Table = serde_json::from_str(manifest)
+        .map_err(|e| py_error(Error::invalid(&source, "manifest", e.to_string())))?;
+    let pixels = images
+        .iter()
+        .zip(&masks)
+        .enumerate()
+        .map(|(i, (image, mask))| {
+            let image = image.as_array();
+            let (height, width, channels) = image.dim();
+            if channels != 3 {
+                return Err(raise(
+                    "InvalidInputError",
+                    format!(
+                        "images[{i}]: expected a (height, width, 3) array, got {channels} channels"
+                    ),
+                ));
+            }
+            let keep = match mask {
+                Some(mask) if mask.as_array().dim() != (height, width) => {
+                    return Err(raise(
+                        "InvalidInputError",
+                        format!(
+                        "masks[{i}]: its shape {:?} differs from the image's ({height}, {width})",
+                        mask.as_array().dim()
+                    ),
+                    ))
+                }
+                Some(mask) => Some(mask.as_array().iter().copied().collect()),
+                None => None,
+            };
+            let rgb = image
+                .as_standard_layout()
+                .as_slice()
+                .expect("a standard layout")
+                .chunks_exact(3)
+                .map(|c| [c[0], c[1], c[2]])
+                .collect();
+            Ok(InMemoryPhoto {
+                name: format!("images[{i}]"),
+                image: LinearImage {
+                    width,
+                    height,
+                    rgb,
+                    saturated: vec![false; width * height],
+                },
+                keep,
+            })
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let capture = Capture::from_tables(&source, entries, pixels).map_err(py_error)?;
+    photo_set(py, None, capture, true)
+}
+
+/// The photo set a function works on: the one in memory, or the one at `path` opened as the
+/// command line does; `--depth` of `real` applied.
+fn capture_of(path: &Path, photos: Option<&Photos>, real: &RealCaptureArgs) -> PyResult<Capture> {
+    match photos {
+        Some(photos) => Ok(real.applied_to(photos.capture.clone())),
+        None => real.open(path).map_err(py_error),
+    }
 }
 
 /// What a fit leaves to be written: the uniform fit file's text, or maps and their fields.
@@ -211,25 +343,30 @@ impl FitOutput {
 
 /// `bouncefit fit PATH ARGV...` without writing files: the fit file's JSON, the chosen fit's
 /// prediction and residual per photo, the maps of a maps fit, and a `FitOutput` to save it.
-/// `None` when an MCMC run stopped early and left its checkpoint.
+/// `photos` (a set in memory) replaces the set at `path`, which then only names it. `None`
+/// when an MCMC run stopped early and left its checkpoint.
 #[pyfunction]
-#[pyo3(signature = (path, argv, progress=None))]
+#[pyo3(signature = (path, argv, progress=None, photos=None))]
 fn fit<'py>(
     py: Python<'py>,
     path: PathBuf,
     argv: Vec<String>,
     progress: Option<Py<PyAny>>,
+    photos: Option<Bound<'py, Photos>>,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
     let argv = std::iter::once(path.display().to_string()).chain(argv);
     let args: FitArgs = parse("fit", argv.collect())?;
     let callback = Callback::new(progress);
-    let out = if args.map_options.maps {
-        fit_maps(py, &args, &callback)?
+    let capture = capture_of(
+        &args.capture,
+        photos.as_ref().map(Bound::get),
+        &args.options.real,
+    )?;
+    if args.map_options.maps {
+        fit_maps(py, &args, capture, &callback)
     } else {
-        fit_uniform(py, &args, &callback)?
-    };
-    callback.finish()?;
-    Ok(out)
+        fit_uniform(py, &args, capture, &callback)
+    }
 }
 
 /// The fit file `-o` names (refused over an existing file without `--force`, as `fit` does),
@@ -244,30 +381,33 @@ fn fit_file_path(args: &FitArgs, capture: &Capture) -> PyResult<PathBuf> {
 fn fit_uniform<'py>(
     py: Python<'py>,
     args: &FitArgs,
-    callback: &Callback,
+    capture: Capture,
+    callback: &Arc<Callback>,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
-    let capture = args.options.real.open(&args.capture).map_err(py_error)?;
     let output = fit_file_path(args, &capture)?;
     let options = args.options.pipeline_options(
         &args.models,
         &args.mcmc,
         &output,
-        Reporting::Off,
+        callback.reporting(),
         args.force,
         args.map_options.holdout_photo,
     );
-    let done = py
-        .detach(|| {
-            pipeline::run(
-                &args.capture,
-                &capture,
-                &options,
-                &|warning| callback.call("warning", warning),
-                &|fit| callback.call("fitted", &fit.summary()),
-            )
-        })
-        .map_err(py_error)?;
-    let Some(done) = done else {
+    let models = options.candidates.len() as u64;
+    let fitted = std::sync::atomic::AtomicU64::new(0);
+    let done = py.detach(|| {
+        pipeline::run(
+            &args.capture,
+            &capture,
+            &options,
+            &|warning| callback.warn(warning),
+            &|fit| {
+                let done = fitted.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                callback.call("fitted", done, models, &fit.summary());
+            },
+        )
+    });
+    let Some(done) = callback.result(done)? else {
         return Ok(None);
     };
     let text = FitFile::of_run(&done, (&args.capture, &capture), &options).to_json();
@@ -292,25 +432,22 @@ fn fit_uniform<'py>(
 fn fit_maps<'py>(
     py: Python<'py>,
     args: &FitArgs,
-    callback: &Callback,
+    capture: Capture,
+    callback: &Arc<Callback>,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
     let model = maps_model(args).map_err(py_error)?;
-    let capture = args.options.real.open(&args.capture).map_err(py_error)?;
     let output = fit_file_path(args, &capture)?;
     let options = args
         .options
-        .maps_options(model, &args.map_options, Reporting::Off);
-    let set = py
-        .detach(|| {
-            MapsSet::new(&args.capture, capture, options, &|warning| {
-                callback.call("warning", warning)
-            })
+        .maps_options(model, &args.map_options, callback.reporting());
+    let set = py.detach(|| {
+        MapsSet::new(&args.capture, capture, options, &|warning| {
+            callback.warn(warning)
         })
-        .map_err(py_error)?;
-    let texels = set.grid.width * set.grid.height;
-    callback.call("records", &format!("{texels} texels"));
-    let run = py.detach(|| set.fit(model)).map_err(py_error)?;
-    callback.call("fitted", &format!("maps of {model}"));
+    });
+    let set = callback.result(set)?;
+    let run = py.detach(|| set.fit(model));
+    let run = callback.result(run)?;
     let fields = set.fit_file_fields(&run);
     let (maps, records) = (&run.fit.maps, &*run.records);
     let residual = records.residuals(run.predicted.clone());
@@ -351,9 +488,10 @@ fn fit_maps<'py>(
 }
 
 /// `bouncefit render --capture CAPTURE --material MATERIAL` without writing files: the linear
-/// render of every photo (a fit file's fitted exposure applied).
+/// render of every photo (a fit file's fitted exposure applied). `photos` (a set in memory)
+/// replaces the set at `capture`.
 #[pyfunction]
-#[pyo3(signature = (capture, material, pixel_samples=4, seed=0, depth=None))]
+#[pyo3(signature = (capture, material, pixel_samples=4, seed=0, depth=None, photos=None))]
 fn render<'py>(
     py: Python<'py>,
     capture: PathBuf,
@@ -361,9 +499,11 @@ fn render<'py>(
     pixel_samples: usize,
     seed: u64,
     depth: Option<f64>,
+    photos: Option<Bound<'py, Photos>>,
 ) -> PyResult<Bound<'py, PyList>> {
     let loaded = load_any_material(&material).map_err(py_error)?;
-    let opened = open_capture(&capture, depth)?;
+    let real = real_capture_args(depth);
+    let opened = capture_of(&capture, photos.as_ref().map(Bound::get), &real)?;
     let (records, pixels) = py
         .detach(|| {
             let records = render_records(&loaded, &material, &opened, pixel_samples)?;
@@ -391,11 +531,13 @@ fn export(py: Python<'_>, argv: Vec<String>) -> PyResult<()> {
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_photo_set, m)?)?;
+    m.add_function(wrap_pyfunction!(photo_set_from_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(export, m)?)?;
     m.add_class::<FitOutput>()?;
+    m.add_class::<Photos>()?;
     m.add("VERSION", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

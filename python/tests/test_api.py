@@ -44,7 +44,7 @@ def test_fit_is_the_command_lines_fit(tmp_path, photos, options, flags):
     assert without_timings(fit.data) == expected
     assert read_fit(tmp_path / "py.json") == expected
     assert fit.model == expected["model"] and list(fit.alpha) == expected["alpha"]
-    fitted = [message for stage, message in events if stage == "fitted"]
+    fitted = [message for stage, _, _, message in events if stage == "fitted"]
     assert len(fitted) == len(expected["candidates"])
     assert all(m.split(":")[0] in {c["model"] for c in expected["candidates"]} for m in fitted)
 
