@@ -16,12 +16,14 @@ geometry in memory (:meth:`PhotoSet.from_arrays`).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import tempfile
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Sequence, Union
+from typing import Any, Callable, Iterator, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
@@ -338,16 +340,17 @@ def fit(
 
 def render(
     photos: Union[PathLike, PhotoSet],
-    material: PathLike,
+    material: Union[PathLike, Fit],
     *,
     pixel_samples: int = 4,
     seed: int = 0,
     depth: Optional[float] = None,
 ) -> list[np.ndarray]:
-    """Render every photo of a photo set with a material or fit file (uniform or maps; a fit's
-    fitted exposure applied), as ``bouncefit render``: per photo a linear ``(h, w, 3)`` array."""
+    """Render every photo of a photo set with a :class:`Fit`, a material or a fit file (uniform
+    or maps; a fit's fitted exposure applied), as ``bouncefit render``: per photo a linear ``(h, w, 3)`` array."""
     path, native = _source(photos)
-    return _native.render(path, os.fspath(material), pixel_samples, seed, depth, native)
+    with _material_file(material) as material_path:
+        return _native.render(path, material_path, pixel_samples, seed, depth, native)
 
 
 def compare(
@@ -362,24 +365,40 @@ def compare(
     """``bouncefit compare``: fit each model, rank them (BIC, held-out error with ``holdout=K``
     or ``holdout=True`` for leave-one-out) and write the report folder ``output``; returns its
     ``report.json``."""
-    argv = [_path(photos), *_argv({"models": models, "holdout": holdout, "output": output,
-                                   "force": force, "quiet": True, **options})]
-    _native.compare(argv)
+    path, native = _source(photos)
+    argv = [path, *_argv({"models": models, "holdout": holdout, "output": output,
+                          "force": force, "quiet": True, **options})]
+    _native.compare(argv, native)
     with open(Path(output) / "report.json", encoding="utf-8") as f:
         return json.load(f)
 
 
 def export(
-    material: PathLike,
+    material: Union[PathLike, Fit],
     format: str,
     output: PathLike,
     *,
     scene: Optional[PathLike] = None,
     force: bool = False,
 ) -> Path:
-    """``bouncefit export``: write a fit or material file as ``json``, ``mitsuba``, ``gltf`` or
-    ``materialx`` (maps: with their textures beside it); returns ``output``."""
-    argv = [os.fspath(material), *_argv({"format": format, "output": output, "scene": scene,
-                                         "force": force})]
-    _native.export(argv)
+    """``bouncefit export``: write a fit (a :class:`Fit`, or a fit or material file) as
+    ``json``, ``mitsuba``, ``gltf`` or ``materialx`` (maps: with their textures beside it);
+    returns ``output``."""
+    with _material_file(material) as path:
+        argv = [path, *_argv({"format": format, "output": output, "scene": scene,
+                              "force": force})]
+        _native.export(argv)
     return Path(output)
+
+
+@contextlib.contextmanager
+def _material_file(material: Union[PathLike, Fit]) -> Iterator[str]:
+    """The path of a material or fit file: ``material`` itself, or a :class:`Fit` saved (with
+    its maps) into a temporary folder that is removed afterwards."""
+    if not isinstance(material, Fit):
+        yield os.fspath(material)
+        return
+    with tempfile.TemporaryDirectory(prefix="bouncefit-") as folder:
+        path = os.path.join(folder, "fit.json")
+        material.save(path)
+        yield path

@@ -5,7 +5,7 @@
 
 use bouncefit::capture::atomic_file::write_atomically;
 use bouncefit::capture::{Capture, InMemoryPhoto, LinearImage};
-use bouncefit::commands::compare::{run_compare, CompareArgs};
+use bouncefit::commands::compare::{compare_photo_set, CompareArgs};
 use bouncefit::commands::export::{run_export, ExportArgs};
 use bouncefit::commands::fit_args::{FitArgs, RealCaptureArgs};
 use bouncefit::commands::fit_maps::maps_model;
@@ -299,10 +299,8 @@ fn photo_set_from_arrays<'py>(
 /// The photo set a function works on: the one in memory, or the one at `path` opened as the
 /// command line does; `--depth` of `real` applied.
 fn capture_of(path: &Path, photos: Option<&Photos>, real: &RealCaptureArgs) -> PyResult<Capture> {
-    match photos {
-        Some(photos) => Ok(real.applied_to(photos.capture.clone())),
-        None => real.open(path).map_err(py_error),
-    }
+    real.open_or(path, photos.map(|p| p.capture.clone()))
+        .map_err(py_error)
 }
 
 /// What a fit leaves to be written: the uniform fit file's text, or maps and their fields.
@@ -514,11 +512,15 @@ fn render<'py>(
     photo_arrays(py, &records, &pixels)
 }
 
-/// `bouncefit compare ARGV...` (writes the report folder).
+/// `bouncefit compare ARGV...` (writes the report folder). `photos` (a set in memory)
+/// replaces the set ARGV names.
 #[pyfunction]
-fn compare(py: Python<'_>, argv: Vec<String>) -> PyResult<()> {
+#[pyo3(signature = (argv, photos=None))]
+fn compare(py: Python<'_>, argv: Vec<String>, photos: Option<Bound<'_, Photos>>) -> PyResult<()> {
     let args: CompareArgs = parse("compare", argv)?;
-    py.detach(|| run_compare(&args)).map_err(py_error)
+    let held = photos.map(|p| p.get().capture.clone());
+    py.detach(|| compare_photo_set(&args, held))
+        .map_err(py_error)
 }
 
 /// `bouncefit export ARGV...` (writes the exported file).

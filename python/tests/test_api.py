@@ -1,6 +1,8 @@
 """The Python API against the command line: same numbers, same files, same errors."""
 
 import json
+import re
+import runpy
 import threading
 import time
 
@@ -98,6 +100,31 @@ def test_export_writes_the_command_lines_file(tmp_path):
     assert written.read_bytes() == (tmp_path / "cli.gltf").read_bytes()
 
 
+@pytest.mark.parametrize("maps", [False, True])
+def test_a_fit_in_memory_exports_and_renders_as_its_file(tmp_path, maps):
+    if maps:
+        fit = bouncefit.fit("datasets/two-materials", "kulla-conty", maps=True, texels="16x16",
+                            bases=2, output=tmp_path / "fit.json")
+        photos = "datasets/two-materials"
+    else:
+        fit = bouncefit.fit(COPPER, output=tmp_path / "fit.json")
+        photos = COPPER
+    for format, name in [("gltf", "x.gltf"), ("mitsuba", "x.xml")]:
+        (tmp_path / format).mkdir()
+        (tmp_path / f"{format}-file").mkdir()
+        bouncefit.export(fit, format, tmp_path / format / name)
+        bouncefit.export(tmp_path / "fit.json", format, tmp_path / f"{format}-file" / name)
+        written = sorted(p.relative_to(tmp_path / format)
+                         for p in (tmp_path / format).rglob("*") if p.is_file())
+        assert written == sorted(p.relative_to(tmp_path / f"{format}-file")
+                                 for p in (tmp_path / f"{format}-file").rglob("*") if p.is_file())
+        for path in written:
+            assert ((tmp_path / format / path).read_bytes()
+                    == (tmp_path / f"{format}-file" / path).read_bytes()), path
+    for a, b in zip(bouncefit.render(photos, fit), bouncefit.render(photos, tmp_path / "fit.json")):
+        assert np.array_equal(a, b)
+
+
 def test_compare_ranks_the_models(tmp_path):
     report = bouncefit.compare(COPPER, ["single", "kulla-conty"], tmp_path / "report")
     text = json.dumps(report)
@@ -147,3 +174,12 @@ def test_a_broken_manifest_is_invalid_input_naming_the_file(broken_set):
     assert isinstance(raised.value, ValueError)
     assert "capture.toml" in str(raised.value)
     assert stderr.strip() == f"error: {raised.value}"
+
+
+def test_the_quickstart_example_runs(capsys, monkeypatch):
+    monkeypatch.setattr("sys.argv", ["quickstart.py", "--texels", "16x16"])
+    runpy.run_path(str(ROOT / "python" / "examples" / "quickstart.py"), run_name="__main__")
+    printed = capsys.readouterr().out
+    assert re.search(r"copper-flash: single, alpha 0\.30\d\d", printed), printed
+    assert re.search(r"two-materials: maps 16x16, base materials .*metal alpha 0\.6", printed), printed
+    assert "held-out photo 8 predicted to" in printed and ".gltf" in printed

@@ -1,6 +1,7 @@
 """A photo set from numpy arrays and the manifest's geometry: the fit of the same photos as a
 folder, and the manifest reader's checks and messages."""
 
+import json
 import re
 import warnings
 from pathlib import Path
@@ -153,10 +154,29 @@ def test_a_nan_pixel_is_left_out_with_the_command_lines_warning():
             bouncefit.fit(photos)
 
 
-def test_unknown_keys_are_warnings_and_commands_need_files():
+def test_unknown_keys_are_warnings_and_no_command_line_reads_arrays():
     images, geometry = arrays_of(COPPER)
     with pytest.warns(bouncefit.BouncefitWarning, match=r"photo\[0\].light.colour: unknown key"):
         lights = [{**geometry["lights"][0], "colour": 2}] + geometry["lights"][1:]
         photos = bouncefit.PhotoSet.from_arrays(images, **{**geometry, "lights": lights})
     with pytest.raises(bouncefit.InvalidInputError, match="held in memory"):
-        bouncefit.compare(photos, ["single"], "/tmp/bouncefit-unused-report")
+        bouncefit.command_line("fit", photos)
+
+
+@pytest.mark.parametrize("options", [
+    {"models": ["single", "kulla-conty"], "holdout": 3},
+    {"models": ["kulla-conty"], "maps": True, "texels": "16x16", "bases": 2, "holdout_photo": 8},
+])
+def test_arrays_compare_as_the_folder(tmp_path, options):
+    folder = "datasets/two-materials" if options.get("maps") else COPPER
+    images, geometry = arrays_of(folder)
+    photos = bouncefit.PhotoSet.from_arrays(images, **geometry)
+    by_path = bouncefit.compare(folder, output=tmp_path / "path", **options)
+    by_arrays = bouncefit.compare(photos, output=tmp_path / "arrays", **options)
+    # The reports differ only in the name the set goes by and in timings.
+    text = json.dumps(without_timings(by_path)).replace(json.dumps(folder),
+                                                        json.dumps(geometry["name"]))
+    assert json.loads(text) == without_timings(by_arrays)
+    model = options["models"][0]
+    for report in ("path", "arrays"):
+        assert (tmp_path / report / model / "fit.json").is_file()

@@ -65,6 +65,23 @@ def test_an_exception_in_the_callback_stops_the_fit(maps):
     assert time.perf_counter() - started < 20
 
 
+def test_an_exception_in_the_callback_stops_the_sampler(tmp_path):
+    mcmc = []
+
+    def progress(stage, done, total, message):
+        if stage == "mcmc":
+            mcmc.append((done, total))
+            if len(mcmc) == 5:
+                raise Stop("enough sampling")
+
+    started = time.perf_counter()
+    with pytest.raises(Stop, match="enough sampling"):
+        bouncefit.fit(COPPER, mcmc=True, output=tmp_path / "fit.json", progress=progress)
+    assert len(mcmc) == 5 and mcmc[-1][0] < mcmc[-1][1]  # stopped well before its end
+    assert time.perf_counter() - started < 30
+    assert not (tmp_path / "fit.json").exists()  # no partial output
+
+
 def test_tqdm_bars():
     pytest.importorskip("tqdm")
     fit = bouncefit.fit(COPPER, progress="tqdm")

@@ -19,6 +19,7 @@ use super::output::StagedFolder;
 use crate::bsdf::Model;
 use crate::capture::atomic_file::write_atomically;
 use crate::capture::image_io::display_exposure;
+use crate::capture::Capture;
 use crate::error::{Error, Result};
 use crate::export::gltf::{described, described_maps};
 use crate::export::maps::MapsConversion;
@@ -87,6 +88,12 @@ fn parse_holdout(text: &str) -> std::result::Result<Holdout, String> {
 }
 
 pub fn run_compare(args: &CompareArgs) -> Result<()> {
+    compare_photo_set(args, None)
+}
+
+/// [`run_compare`] on the photo set `held` in memory (the Python package's sets from arrays)
+/// when given, which `args.capture` then only names; else on the set at `args.capture`.
+pub fn compare_photo_set(args: &CompareArgs, held: Option<Capture>) -> Result<()> {
     for (i, model) in args.models.iter().enumerate() {
         if args.models[..i].contains(model) {
             return Err(Error::argument(
@@ -96,7 +103,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
         }
     }
     if args.maps.maps {
-        return run_maps_compare(args);
+        return run_maps_compare(args, held);
     }
     if args.maps.holdout_photo.is_some() {
         return Err(Error::argument(
@@ -104,7 +111,7 @@ pub fn run_compare(args: &CompareArgs) -> Result<()> {
             "a uniform comparison holds photos out with --holdout K; --holdout-photo N is for --maps",
         ));
     }
-    let capture = args.options.real.open(&args.capture)?;
+    let capture = args.options.real.open_or(&args.capture, held)?;
     let holdout = args.holdout.map(|h| match h {
         Holdout::LeaveOneOut => capture.photos.len(),
         Holdout::Folds(k) => k,
@@ -252,7 +259,7 @@ fn write_pages<P: Page + Serialize>(page: &P, root: &Path) -> Result<()> {
 }
 
 /// `compare --maps`: every model's maps fit of the same photos, and the maps report.
-fn run_maps_compare(args: &CompareArgs) -> Result<()> {
+fn run_maps_compare(args: &CompareArgs, held: Option<Capture>) -> Result<()> {
     if args.holdout.is_some() {
         return Err(Error::argument(
             "--holdout",
@@ -268,7 +275,7 @@ fn run_maps_compare(args: &CompareArgs) -> Result<()> {
     for &model in &args.models {
         check_model(model)?;
     }
-    let capture = args.options.real.open(&args.capture)?;
+    let capture = args.options.real.open_or(&args.capture, held)?;
     let folder = StagedFolder::new(&args.output, args.force)?;
     // Each maps fit takes the options of the first model with its own model.
     let options = args.options.maps_options(

@@ -176,8 +176,17 @@ impl RealCaptureArgs {
         Ok(self.applied_to(super::inputs::open_capture(path)?))
     }
 
+    /// The photo set `held` in memory if given, else the one at `path` ([`Self::open`]),
+    /// with `--depth` applied.
+    pub fn open_or(&self, path: &Path, held: Option<Capture>) -> Result<Capture> {
+        match held {
+            Some(capture) => Ok(self.applied_to(capture)),
+            None => self.open(path),
+        }
+    }
+
     /// `capture` with `--depth` applied.
-    pub fn applied_to(&self, mut capture: Capture) -> Capture {
+    fn applied_to(&self, mut capture: Capture) -> Capture {
         if let Some(depth) = self.depth {
             capture.depth = depth;
         }
