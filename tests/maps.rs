@@ -1043,6 +1043,26 @@ fn compare_maps_reports_each_model_and_what_multiple_bounces_change() {
         .join(maps["roughness_colour_bar"].as_str().unwrap())
         .is_file());
 
+    // The per-texel sds beside them, laid out alike: roughness, F0 and albedo per model, each
+    // column with its colour bar and a positive median sd per model.
+    let sds = &report["uncertainty_image"];
+    assert_eq!(sds["rows"], maps["rows"]);
+    assert_eq!(
+        sds["columns"],
+        serde_json::json!(["roughness", "specular", "diffuse"])
+    );
+    assert_eq!(
+        png_size(&out.join(sds["path"].as_str().unwrap())),
+        (3 * cells + 2 * 4, 2 * cells + 4)
+    );
+    for c in 0..3 {
+        assert!(sds["scales"][c].as_f64().unwrap() > 0.0);
+        assert!(out.join(sds["colour_bars"][c].as_str().unwrap()).is_file());
+        for row in 0..2 {
+            assert!(sds["medians"][c][row].as_f64().unwrap() > 0.0, "{c} {row}");
+        }
+    }
+
     // kulla-conty minus single.
     let differences = report["differences"].as_array().unwrap();
     assert_eq!(differences.len(), 1);
@@ -1128,12 +1148,12 @@ fn compare_maps_reports_each_model_and_what_multiple_bounces_change() {
     for loss in [single_loss, kulla_loss] {
         assert!((-0.6..-0.05).contains(&loss), "{loss}");
     }
-    // The figures: maps, roughness bar, two difference images with their bars; the relit
-    // images (four per model) and their bar; every photo's images.
+    // The figures: maps, roughness bar, the sds with three bars, two difference images with
+    // their bars; the relit images (four per model) and their bar; every photo's images.
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert_eq!(
         html.matches("src=\"data:image/png;base64,").count(),
-        6 + (2 * 4 + 1) + photos.len() * (1 + 2 * 2)
+        2 + 4 + 4 + (2 * 4 + 1) + photos.len() * (1 + 2 * 2)
     );
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(

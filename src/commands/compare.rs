@@ -35,7 +35,8 @@ use crate::progress::Reporting;
 use crate::render::render_all;
 use crate::report::images::{residual_scale, write_model_images};
 use crate::report::maps::{
-    write_difference_images, write_maps_image, DifferenceRow, MapsModelRow, MapsReport,
+    write_difference_images, write_maps_image, write_uncertainty_image, DifferenceRow,
+    MapsModelRow, MapsReport,
 };
 use crate::report::relit::{write_relit, RelitInput};
 use crate::report::{html, markdown, plots, HeldOut, ModelRow, Page, Report};
@@ -319,6 +320,8 @@ fn run_maps_compare(args: &CompareArgs, held: Option<Capture>) -> Result<()> {
     }
     let fits: Vec<_> = runs.iter().map(|r| (r.model, &r.fit.maps)).collect();
     let maps_image = write_maps_image(&root, &fits)?;
+    let sds: Vec<_> = runs.iter().map(|r| (r.model, &r.fit.uncertainty)).collect();
+    let uncertainty_image = write_uncertainty_image(&root, &sds)?;
     let mut differences = Vec::new();
     if let Some(single) = runs.iter().find(|r| r.model == Model::Single) {
         for run in runs.iter().filter(|r| r.model != Model::Single) {
@@ -353,6 +356,7 @@ fn run_maps_compare(args: &CompareArgs, held: Option<Capture>) -> Result<()> {
         verdicts: MapsReport::verdicts(&rows, &differences),
         models: rows,
         maps_image,
+        uncertainty_image,
         differences,
         residual_scale: scale,
     };

@@ -8,6 +8,7 @@
 //! | `report.md`, `report.html` | the same pages as the uniform comparison ([`super::Page`]) |
 //! | `maps.png` | one row per model (in `--models` order), one column per map ([`MapsImage`]), each texel a square of [`texel_pixels`] pixels (nearest neighbour, about [`MAP_PIXELS`] pixels a map) |
 //! | `roughness_colour_bar.png` | the roughness column's colour bar |
+//! | `uncertainty.png`, `uncertainty_<column>_bar.png` | per model (row) the per-texel sd of `ln alpha`, F0 and albedo (columns), upscaled as `maps.png`, on viridis up to each column's 99th percentile ([`UncertaintyImage`]), and each column's colour bar |
 //! | `<model>-minus-single_alpha.png`, `_diffuse.png` | per texel `alpha` and mean diffuse albedo of `model` minus `single`, on the residuals' diverging map (red: larger in `model`) with full colour at `+-alpha_scale`, `+-diffuse_scale`, upscaled as `maps.png`; `_alpha_bar.png`, `_diffuse_bar.png` their colour bars |
 //! | `relit/` | every model's fit under the bundled sky and its glTF export ([`super::relit`]) |
 //! | `<model>/fit.json`, `<model>/fit.maps/` | the model's maps fit file, as `fit --maps` writes it |
@@ -22,7 +23,7 @@ use crate::capture::image_io::{linear_to_srgb, write_png_rgb8};
 use crate::error::{Error, Result};
 use crate::fit::bayes::holdout::HeldOutPhoto;
 use crate::maps::compare::{MapsDifference, TexelDeltas};
-use crate::maps::fit::MapsFit;
+use crate::maps::fit::{MapsFit, Uncertainty};
 use crate::maps::{MaterialMaps, TexelGrid};
 use serde::Serialize;
 use std::path::Path;
@@ -112,6 +113,8 @@ pub struct MapsReport {
     pub holdout_photo: Option<usize>,
     pub models: Vec<MapsModelRow>,
     pub maps_image: MapsImage,
+    /// The per-texel standard deviations of every model's maps.
+    pub uncertainty_image: UncertaintyImage,
     /// Each model other than `single` minus `single` (empty without `single`).
     pub differences: Vec<DifferenceRow>,
     pub relit: Relit,
@@ -145,24 +148,21 @@ fn map_colour(maps: &MaterialMaps, map: &str, t: usize) -> [u8; 3] {
 /// a column per map (`normal` only when some model has one); returns its layout.
 pub fn write_maps_image(root: &Path, fits: &[(Model, &MaterialMaps)]) -> Result<MapsImage> {
     let grid = fits[0].1.grid;
-    let k = texel_pixels(grid);
     let mut columns = vec!["diffuse", "specular", "roughness"];
     if fits.iter().any(|(_, m)| m.normal.is_some()) {
         columns.push("normal");
     }
-    let cell = [grid.width * k, grid.height * k];
-    let (c, r) = (columns.len(), fits.len());
-    let width = c * cell[0] + (c - 1) * GAP;
-    let height = r * cell[1] + (r - 1) * GAP;
-    let mut bytes = vec![255u8; width * height * 3];
-    for (row, (_, maps)) in fits.iter().enumerate() {
-        for (column, map) in columns.iter().enumerate() {
-            let origin = [column * (cell[0] + GAP), row * (cell[1] + GAP)];
-            let colours: Vec<[u8; 3]> = (0..grid.len()).map(|t| map_colour(maps, map, t)).collect();
-            paint_upscaled(&mut bytes, width, origin, grid, k, &colours);
-        }
-    }
-    write_rgb8(&root.join(MAPS_IMAGE), &bytes, width, height)?;
+    let cell = write_cell_grid(
+        &root.join(MAPS_IMAGE),
+        grid,
+        fits.len(),
+        columns.len(),
+        |r, c| {
+            (0..grid.len())
+                .map(|t| map_colour(fits[r].1, columns[c], t))
+                .collect()
+        },
+    )?;
     let ticks = [0.0, 0.25, 0.5, 0.75, 1.0].map(|t| (t, format!("{t}")));
     colour_bar(
         &root.join(ROUGHNESS_BAR),
@@ -175,11 +175,135 @@ pub fn write_maps_image(root: &Path, fits: &[(Model, &MaterialMaps)]) -> Result<
         rows: fits.iter().map(|(m, _)| *m).collect(),
         columns,
         cell,
-        texel_pixels: k,
+        texel_pixels: texel_pixels(grid),
         gap: GAP,
         encoding: "each texel a square, nearest neighbour; diffuse and specular (F0): linear value as sRGB; roughness: alpha on viridis (colour bar; anisotropic texels: sqrt(alpha_x alpha_y)), 1 and above yellow; normal: (n + 1) / 2 per channel; dark grey: no such map",
         roughness_colour_bar: ROUGHNESS_BAR.into(),
     })
+}
+
+/// The per-texel standard deviations side by side: a row per model, a column per quantity.
+#[derive(Clone, Debug, Serialize)]
+pub struct UncertaintyImage {
+    pub path: String,
+    pub rows: Vec<Model>,
+    /// `roughness` (the sd of `ln alpha`: alpha's relative sd), `specular` (of F0) and
+    /// `diffuse` (of the albedo), these two the mean over RGB.
+    pub columns: Vec<&'static str>,
+    pub cell: [usize; 2],
+    /// Per column, the sd shown at full colour (the 99th percentile over all rows' texels).
+    pub scales: Vec<f64>,
+    /// Per column, the median sd per row (`None`: the model has no such map).
+    pub medians: Vec<Vec<Option<f64>>>,
+    /// Per column, its colour bar.
+    pub colour_bars: Vec<String>,
+}
+
+/// The per-texel standard deviations image, relative to the report folder.
+pub const UNCERTAINTY_IMAGE: &str = "uncertainty.png";
+
+/// The sd of `column` ([`UncertaintyImage::columns`]) per texel, if the fit has that map.
+fn sd_values(uncertainty: &Uncertainty, column: &str) -> Option<Vec<f64>> {
+    let mean = |v: &[[f32; 3]]| -> Vec<f64> {
+        v.iter()
+            .map(|c| c.iter().map(|&x| f64::from(x)).sum::<f64>() / 3.0)
+            .collect()
+    };
+    match column {
+        "roughness" => Some(
+            uncertainty
+                .roughness
+                .iter()
+                .map(|r| f64::from(r[2]))
+                .collect(),
+        ),
+        "specular" => uncertainty.specular.as_deref().map(mean),
+        _ => Some(mean(&uncertainty.diffuse)),
+    }
+}
+
+/// Writes [`UNCERTAINTY_IMAGE`] and a colour bar per column under `root` (docs/maps.md,
+/// "Uncertainty": the sds are the fit's per-texel Gauss-Newton posterior); returns its layout.
+pub fn write_uncertainty_image(
+    root: &Path,
+    fits: &[(Model, &Uncertainty)],
+) -> Result<UncertaintyImage> {
+    let grid = fits[0].1.grid;
+    let columns = vec!["roughness", "specular", "diffuse"];
+    let values: Vec<Vec<Option<Vec<f64>>>> = columns
+        .iter()
+        .map(|c| fits.iter().map(|(_, u)| sd_values(u, c)).collect())
+        .collect();
+    let scales: Vec<f64> = values
+        .iter()
+        .map(|rows| magnitude_scale(rows.iter().flatten().flatten().copied()))
+        .collect();
+    let cell = write_cell_grid(
+        &root.join(UNCERTAINTY_IMAGE),
+        grid,
+        fits.len(),
+        columns.len(),
+        |r, c| match &values[c][r] {
+            Some(v) => v.iter().map(|x| sequential_colour(x / scales[c])).collect(),
+            None => vec![ABSENT; grid.len()],
+        },
+    )?;
+    let mut colour_bars = Vec::new();
+    for (column, scale) in columns.iter().zip(&scales) {
+        let name = format!("uncertainty_{column}_bar.png");
+        let ticks = [0.0, 0.5, 1.0].map(|t| (t, format!("{:.3}", t * scale)));
+        let caption = match *column {
+            "roughness" => "sd of ln alpha (alpha's relative sd)",
+            "specular" => "sd of F0 (mean over RGB)",
+            _ => "sd of the diffuse albedo (mean over RGB)",
+        };
+        colour_bar(&root.join(&name), caption, sequential_colour, &ticks)?;
+        colour_bars.push(name);
+    }
+    let medians = values
+        .iter()
+        .map(|rows| rows.iter().map(|v| v.as_deref().map(median)).collect())
+        .collect();
+    Ok(UncertaintyImage {
+        path: UNCERTAINTY_IMAGE.into(),
+        rows: fits.iter().map(|(m, _)| *m).collect(),
+        columns,
+        cell,
+        scales,
+        medians,
+        colour_bars,
+    })
+}
+
+fn median(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted[sorted.len() / 2]
+}
+
+/// Writes an image of `rows` by `columns` cells, [`GAP`] pixels apart on white, each cell the
+/// texel `colours(row, column)` of `grid` upscaled as [`texel_pixels`] says; returns the
+/// cell's size in pixels.
+fn write_cell_grid(
+    path: &Path,
+    grid: TexelGrid,
+    rows: usize,
+    columns: usize,
+    colours: impl Fn(usize, usize) -> Vec<[u8; 3]>,
+) -> Result<[usize; 2]> {
+    let k = texel_pixels(grid);
+    let cell = [grid.width * k, grid.height * k];
+    let width = columns * cell[0] + (columns - 1) * GAP;
+    let height = rows * cell[1] + (rows - 1) * GAP;
+    let mut bytes = vec![255u8; width * height * 3];
+    for row in 0..rows {
+        for column in 0..columns {
+            let origin = [column * (cell[0] + GAP), row * (cell[1] + GAP)];
+            paint_upscaled(&mut bytes, width, origin, grid, k, &colours(row, column));
+        }
+    }
+    write_rgb8(path, &bytes, width, height)?;
+    Ok(cell)
 }
 
 /// Paints the texel `colours` of `grid` into the RGB `bytes` of an image `width` pixels wide,
@@ -446,6 +570,31 @@ impl Page for MapsReport {
             "Roughness colour bar".into(),
             self.maps_image.roughness_colour_bar.clone(),
         ));
+        let u = &self.uncertainty_image;
+        figures.push((
+            format!(
+                "Per-texel standard deviations (the fit's Gauss-Newton posterior): rows {}; columns {}",
+                rows.join(", "),
+                u.columns.join(", ")
+            ),
+            u.path.clone(),
+        ));
+        for (c, column) in u.columns.iter().enumerate() {
+            let medians: Vec<String> = u
+                .rows
+                .iter()
+                .zip(&u.medians[c])
+                .map(|(m, v)| v.map_or(format!("{m} n/a"), |v| format!("{m} {v:.4}")))
+                .collect();
+            figures.push((
+                format!(
+                    "{column} sd colour bar (full colour at {:.4}; median per model: {})",
+                    u.scales[c],
+                    medians.join(", ")
+                ),
+                u.colour_bars[c].clone(),
+            ));
+        }
         for d in &self.differences {
             let (images, model) = (&d.images, d.difference.model);
             figures.push((
