@@ -2,9 +2,9 @@
 //! the metallic workflow, and the texture files.
 //!
 //! Each texel is its own uniform material ([`MaterialMaps::texel`]) and gets the base kind of
-//! the uniform export ([`super::base`]): a texel with every Schlick `F0 < 0.08` and a diffuse
-//! albedo is a dielectric (the `Dielectric` texels of `fit --maps`, [`crate::maps::fit::Kind`]),
-//! any other a metal. The formats share one index of refraction for all dielectric texels (glTF's
+//! the uniform export ([`super::base`]): a texel with a diffuse albedo (and Schlick `F0 < 1`) is
+//! a dielectric (the `Dielectric` texels of `fit --maps`, [`crate::maps::fit::Kind`], whatever
+//! their `F0`), any other a metal (the fit's `Metal` texels have no diffuse). The formats share one index of refraction for all dielectric texels (glTF's
 //! `KHR_materials_ior` and the shaders' `specular_IOR` are not textures): that of the strongest
 //! dielectric `F0` over the map, and each dielectric texel's `F0` is that index's reflectance
 //! times its [`TexelFacts::specular_tint`] in [0, 1].

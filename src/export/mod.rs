@@ -16,7 +16,7 @@
 //!
 //! | fact | rule | source |
 //! | --- | --- | --- |
-//! | base kind | [`Base::Dielectric`] for dielectric Fresnel, and for Schlick with every `F0 < 0.08` plus a nonzero diffuse albedo (plastic-like); [`Base::Metal`] otherwise | [`DIELECTRIC_F0_LIMIT`] |
+//! | base kind | [`Base::Dielectric`] for dielectric Fresnel, and for Schlick `F0 < 1` with a nonzero diffuse albedo: the maps fit's own rule (a metal texel has no diffuse), and the closer description, since the formats' dielectric (KHR_materials_ior and `_specular`, MaterialX `specular_IOR` and `specular_color`) gives Schlick's curve from the same per-channel `F0` to 1 with the diffuse kept under it, where a metal base drops the diffuse; [`Base::Metal`] otherwise | glTF 2.0 KHR_materials_specular, "Implementation" |
 //! | equivalent conductor | conductor: itself; dielectric: `eta + 0i` (the same reflectance); Schlick / white: the Gulbrandsen conductor with reflectivity `F0` (capped at [`MAX_REFLECTIVITY`](crate::microfacet::fresnel::MAX_REFLECTIVITY)) whose edge tint is fitted to the Schlick curve by least squares in `cos theta` | Gulbrandsen 2014, JCGT 3(4), eq. 2-5 |
 //! | edge tint | Gulbrandsen's `g` of the equivalent conductor | ibid. |
 //! | F82 tint | `F(1/7) / Schlick(F0, 1/7)` of the equivalent conductor, exactly 1 for Schlick | Hoffman 2019 "Generalization of Schlick's Fresnel approximation"; OpenPBR 1.1 spec, section "Metal" |
@@ -70,10 +70,6 @@ impl std::str::FromStr for ExportFormat {
         }
     }
 }
-
-/// Schlick `F0` below this in every channel, with a diffuse albedo, reads as a dielectric
-/// (plastic-like) base rather than a metal: dielectrics have `F0 < 0.08` up to `eta = 1.79`.
-pub const DIELECTRIC_F0_LIMIT: f64 = 0.08;
 
 /// The Schlick and the F82-tint models meet the exact curve at `cos theta = 1/7`
 /// (about 82 degrees; Hoffman 2019, OpenPBR 1.1).
@@ -260,8 +256,7 @@ pub fn base(material: &Material) -> Base {
             specular_tint: [1.0; 3],
         },
         FresnelSpec::Schlick { f0 }
-            if f0.iter().all(|&f| f < DIELECTRIC_F0_LIMIT)
-                && material.diffuse.iter().any(|&d| d > 0.0) =>
+            if f0.iter().all(|&f| f < 1.0) && material.diffuse.iter().any(|&d| d > 0.0) =>
         {
             let strongest = f0.iter().cloned().fold(0.0, f64::max);
             let ior = ior_from_f0(strongest);
