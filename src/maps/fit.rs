@@ -392,24 +392,13 @@ struct TexelModel<'a> {
     space: ParamSpace,
     normals: bool,
     records: &'a ShadingRecords,
-    /// Each sub-sample's directions as `tabulated`'s lobe reads them ([`prepared_directions`]).
-    lobe_directions: Option<&'a [Option<LobeDirections>]>,
-}
-
-/// For `tabulated` without normals, each sub-sample's directions as its lobe reads them
-/// ([`LobeDirections`], [`crate::bsdf::registry::Capabilities::prepared_directions`]),
-/// prepared once for every evaluation of a fit; `None` otherwise (with normals the directions
-/// turn with each texel's slopes).
-fn prepared_directions(
-    space: &ParamSpace,
-    normals: bool,
-    records: &ShadingRecords,
-) -> Option<Vec<Option<LobeDirections>>> {
-    (space.model.capabilities().prepared_directions && !normals).then(|| {
-        (records.wi.par_iter().zip(&records.wo))
-            .map(|(&wi, &wo)| LobeDirections::new(wi, wo))
-            .collect()
-    })
+    /// For `tabulated` without normals, the directions of the sub-samples of one texel's
+    /// pixels (the first slice), in their order, as its lobe reads them ([`LobeDirections`],
+    /// [`crate::bsdf::registry::Capabilities::prepared_directions`]), prepared once for the
+    /// evaluations of a solve ([`TexelModel::solve`]); other pixels, and `None`, take the
+    /// lobe's own computation of them, which gives the same values to the last bit. Per solve
+    /// rather than per fit: for every sub-sample of a 1024^2 photo set they held 1.6 GB.
+    lobe_directions: Option<(&'a [usize], &'a [Option<LobeDirections>])>,
 }
 
 /// A texel's BRDF at one point of its coordinates.
@@ -420,7 +409,8 @@ enum TexelBrdf<'a, T> {
 }
 
 impl<T: Real> TexelBrdf<'_, T> {
-    /// `f` at sub-sample `s`, whose directions in the texel's shading frame are `wi`, `wo`.
+    /// `f` at the texel's sub-sample `s` (in the order of its pixels), whose directions in
+    /// the texel's shading frame are `wi`, `wo`.
     fn eval(&self, s: usize, wi: Vec3<T>, wo: Vec3<T>, rng: &mut Rng) -> Rgb<T> {
         match self {
             TexelBrdf::Tabulated(lobe, directions) => {
@@ -476,15 +466,34 @@ struct TexelFit {
 }
 
 impl TexelModel<'_> {
-    /// The texel's BRDF at the surface of its base coordinates.
-    fn brdf<T: Real>(&self, single: SingleBounce<T>) -> TexelBrdf<'_, T> {
+    /// The texel's BRDF at the surface of its base coordinates, evaluated at `pixels`.
+    fn brdf<T: Real>(&self, single: SingleBounce<T>, pixels: &[usize]) -> TexelBrdf<'_, T> {
         match self.lobe_directions {
-            Some(directions) => TexelBrdf::Tabulated(Tabulated::new(single), directions),
-            None => TexelBrdf::Any(
+            Some((prepared_for, directions)) if std::ptr::eq(prepared_for, pixels) => {
+                TexelBrdf::Tabulated(Tabulated::new(single), directions)
+            }
+            _ => TexelBrdf::Any(
                 differentiable(self.space.model, single, BounceCap::NONE)
                     .expect("maps fits take analytic models"),
             ),
         }
+    }
+
+    /// Whether a solve prepares its sub-samples' directions ([`TexelModel::lobe_directions`]):
+    /// with normals they turn with each texel's slopes.
+    fn prepares_directions(&self) -> bool {
+        self.space.model.capabilities().prepared_directions && !self.normals
+    }
+
+    /// The directions of the sub-samples of `pixels`, in their order, as `tabulated`'s lobe
+    /// reads them.
+    fn directions_of(&self, pixels: &[usize]) -> Vec<Option<LobeDirections>> {
+        let spp = self.records.samples_per_pixel;
+        pixels
+            .iter()
+            .flat_map(|&p| p * spp..(p + 1) * spp)
+            .map(|s| LobeDirections::new(self.records.wi[s], self.records.wo[s]))
+            .collect()
     }
 
     fn dim(&self) -> usize {
@@ -537,16 +546,16 @@ impl TexelModel<'_> {
     ) -> impl Iterator<Item = ([T; 3], [T; 3])> + 's {
         let base = self.space.dim();
         let surface = self.space.surface(&x[..base]);
-        let brdf = self.brdf(surface.single);
+        let brdf = self.brdf(surface.single, pixels);
         let frame = self
             .normals
             .then(|| ShadingFrame::new(normal_from_slopes(x[base], x[base + 1])));
         let spp = self.records.samples_per_pixel;
         let mean = T::c(1.0 / spp as f64);
         let mut rng = Rng::seed_from_u64(0);
-        pixels.iter().map(move |&p| {
+        pixels.iter().enumerate().map(move |(i, &p)| {
             let (mut specular, mut shading) = ([T::zero(); 3], [T::zero(); 3]);
-            for s in p * spp..(p + 1) * spp {
+            for (j, s) in (p * spp..(p + 1) * spp).enumerate() {
                 let e = self.records.irradiance[s];
                 if e == [0.0; 3] {
                     continue;
@@ -565,7 +574,7 @@ impl TexelModel<'_> {
                         (i, o, i.z / wi.z)
                     }
                 };
-                let Rgb(f) = brdf.eval(s, wi_l, wo_l, &mut rng);
+                let Rgb(f) = brdf.eval(i * spp + j, wi_l, wo_l, &mut rng);
                 for c in 0..3 {
                     let weight = ratio * T::c(e[c]);
                     specular[c] += f[c] * weight;
@@ -707,9 +716,20 @@ impl TexelModel<'_> {
                 precision: vec![0.0; N],
             };
         }
+        let prepared;
+        let model = match self.lobe_directions {
+            None if self.prepares_directions() => {
+                prepared = self.directions_of(pixels);
+                TexelModel {
+                    lobe_directions: Some((pixels, &prepared)),
+                    ..*self
+                }
+            }
+            _ => *self,
+        };
         let mut x = SVector::<f64, N>::from_column_slice(&start);
         let mut damping = 1e-3;
-        let mut at = self.linearise::<N, M>(x.as_slice(), pixels, sigma2, prior);
+        let mut at = model.linearise::<N, M>(x.as_slice(), pixels, sigma2, prior);
         for _ in 0..MAX_ITERATIONS {
             let noise = (at.data_cost / (3 * pixels.len()) as f64).max(sigma2);
             let settled = predicted_decrease(&at.matrix, &at.gradient)
@@ -728,11 +748,11 @@ impl TexelModel<'_> {
                     continue;
                 };
                 let trial = x - factor.solve(&at.gradient).map(|s| s.clamp(-2.0, 2.0));
-                let trial_cost = self.cost(trial.as_slice(), pixels, sigma2, prior);
+                let trial_cost = model.cost(trial.as_slice(), pixels, sigma2, prior);
                 if trial_cost < at.cost {
                     let gain = at.cost - trial_cost;
                     x = trial;
-                    at = self.linearise::<N, M>(x.as_slice(), pixels, sigma2, prior);
+                    at = model.linearise::<N, M>(x.as_slice(), pixels, sigma2, prior);
                     damping = (damping / 3.0).max(1e-9);
                     improved = gain > 1e-9 * at.cost.max(1e-12);
                     break;
@@ -1072,16 +1092,11 @@ fn fit_level(
         Normals::On => &[true],
         Normals::Auto => &[false, true],
     };
-    // Without normals the directions are the same at every evaluation ([`prepared_directions`]).
-    let directions = candidates
-        .contains(&false)
-        .then(|| prepared_directions(&space, false, records))
-        .flatten();
     let model_with = |normals: bool| TexelModel {
         space,
         normals,
         records,
-        lobe_directions: if normals { None } else { directions.as_deref() },
+        lobe_directions: None,
     };
     let validation_photo = options
         .validation_photo
@@ -2700,19 +2715,19 @@ mod tests {
             diffuse: true,
             ..ParamSpace::plain(Model::Tabulated)
         };
-        let directions = prepared_directions(&space, false, &records);
-        assert!(directions.is_some());
-        let prepared = TexelModel {
+        let generic = TexelModel {
             space,
             normals: false,
             records: &records,
-            lobe_directions: directions.as_deref(),
-        };
-        let generic = TexelModel {
             lobe_directions: None,
-            ..prepared
         };
+        assert!(generic.prepares_directions());
         let pixels = [0, 1];
+        let directions = generic.directions_of(&pixels);
+        let prepared = TexelModel {
+            lobe_directions: Some((&pixels, &directions)),
+            ..generic
+        };
         let prior = generic.generic_prior(Kind::Metal);
         for x in [
             vec![0.3f64.ln(), 0.5, -0.2, 1.0, -2.0, 0.0, 1.0],

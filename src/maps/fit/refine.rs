@@ -50,14 +50,11 @@ pub(super) fn refine(
     coarse_grid: TexelGrid,
 ) -> Result<Level> {
     let normals = coarse.normals;
-    let directions = (!normals)
-        .then(|| prepared_directions(&space, false, records))
-        .flatten();
     let model = TexelModel {
         space,
         normals,
         records,
-        lobe_directions: directions.as_deref(),
+        lobe_directions: None,
     };
     let grid = options.grid;
     let held_out = options.held_out_photo.as_slice();
