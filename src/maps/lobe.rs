@@ -22,7 +22,12 @@ pub struct TexelLobe {
 impl TexelLobe {
     /// The lobes of every texel of `maps`, in texel order.
     pub fn all(maps: &MaterialMaps) -> Vec<TexelLobe> {
-        (0..maps.grid.len())
+        TexelLobe::of_texels(maps, 0..maps.grid.len())
+    }
+
+    /// The lobes of the texels `texels` of `maps`, in texel order.
+    pub fn of_texels(maps: &MaterialMaps, texels: std::ops::Range<usize>) -> Vec<TexelLobe> {
+        texels
             .into_par_iter()
             .map(|t| {
                 let material = maps.texel(t);

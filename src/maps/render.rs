@@ -27,19 +27,38 @@ pub fn render_maps(
             "a maps material renders only photo sets (records with texture coordinates)",
         ));
     }
-    let lobes = TexelLobe::all(maps);
-    Ok(accumulate(records, pixels, [0.0; 3], seed, |_, s, rng| {
-        let lobe = &lobes[maps.grid.texel(records.uv[s])];
-        let (wi, wo) = (Vec3::from_f64(records.wi[s]), Vec3::from_f64(records.wo[s]));
-        // The records' irradiance holds the geometric cosine wi.z: replaced by the shading
-        // frame's (a ratio of exactly 1 without a normal map).
-        let Some((i, o)) = lobe.local(wi, wo) else {
-            return Rgb([0.0; 3]);
-        };
-        let cosine_ratio = i.z / wi.z;
-        Rgb(lobe.value(i, o, rng).map(|v| v * cosine_ratio))
-    }))
+    let texel_of = |s: usize| maps.grid.texel(records.uv[s]);
+    let spp = records.samples_per_pixel;
+    let mut out = Vec::with_capacity(pixels.len());
+    for chunk in pixels.chunks(LOBE_CHUNK_PIXELS) {
+        // The texels the chunk's lit sub-samples see: in a photo's row-major pixels, a band.
+        let seen = chunk
+            .iter()
+            .flat_map(|&p| p * spp..(p + 1) * spp)
+            .filter(|&s| records.irradiance[s] != [0.0; 3])
+            .map(texel_of);
+        let (first, last) = seen.fold((usize::MAX, 0), |(a, b), t| (a.min(t), b.max(t)));
+        let lobes = TexelLobe::of_texels(maps, first.min(last)..last + 1);
+        // Each pixel draws from its own stream, so chunks leave the values as they were.
+        out.extend(accumulate(records, chunk, [0.0; 3], seed, |_, s, rng| {
+            let lobe = &lobes[texel_of(s) - first];
+            let (wi, wo) = (Vec3::from_f64(records.wi[s]), Vec3::from_f64(records.wo[s]));
+            // The records' irradiance holds the geometric cosine wi.z: replaced by the shading
+            // frame's (a ratio of exactly 1 without a normal map).
+            let Some((i, o)) = lobe.local(wi, wo) else {
+                return Rgb([0.0; 3]);
+            };
+            let cosine_ratio = i.z / wi.z;
+            Rgb(lobe.value(i, o, rng).map(|v| v * cosine_ratio))
+        }));
+    }
+    Ok(out)
 }
+
+/// Pixels [`render_maps`] renders at a time, building the lobes of the texels they see for
+/// each chunk: a `tabulated` texel's lobe is about 2 kB, so the lobes of every texel of a
+/// 1024^2 grid took 2 GB at once, more than the fit itself.
+const LOBE_CHUNK_PIXELS: usize = 1 << 16;
 
 /// Predicted radiance of every pixel of every photo for a uniform or maps material.
 pub fn render_any(
