@@ -11,6 +11,7 @@ use crate::fit::point::exposure::exposed_records;
 use crate::render::{accumulate, render_pixels};
 use crate::scalar::{Rgb, Vec3};
 use crate::shading::ShadingRecords;
+use rayon::prelude::*;
 use std::path::Path;
 
 /// Predicted radiance of `pixels` for `maps`. Needs records built from a capture (with texture
@@ -29,18 +30,43 @@ pub fn render_maps(
     }
     let texel_of = |s: usize| maps.grid.texel(records.uv[s]);
     let spp = records.samples_per_pixel;
-    let mut out = Vec::with_capacity(pixels.len());
-    for chunk in pixels.chunks(LOBE_CHUNK_PIXELS) {
-        // The texels the chunk's lit sub-samples see: in a photo's row-major pixels, a band.
-        let seen = chunk
-            .iter()
-            .flat_map(|&p| p * spp..(p + 1) * spp)
-            .filter(|&s| records.irradiance[s] != [0.0; 3])
-            .map(texel_of);
-        let (first, last) = seen.fold((usize::MAX, 0), |(a, b), t| (a.min(t), b.max(t)));
+    let lit = |p: usize| (p * spp..(p + 1) * spp).filter(|&s| records.irradiance[s] != [0.0; 3]);
+    // The pixels (positions in `pixels`) of each band of texels, by their first lit sub-sample,
+    // across all photos, sorted by band (a counting sort into one array): each band's lobes
+    // are built once.
+    let band_of: Vec<u32> = (pixels.par_iter())
+        .map(|&p| {
+            lit(p)
+                .next()
+                .map_or(0, |s| (texel_of(s) / LOBE_BAND_TEXELS) as u32)
+        })
+        .collect();
+    let mut offsets = vec![0usize; maps.grid.len().div_ceil(LOBE_BAND_TEXELS) + 1];
+    for &b in &band_of {
+        offsets[b as usize + 1] += 1;
+    }
+    for b in 1..offsets.len() {
+        offsets[b] += offsets[b - 1];
+    }
+    let mut by_band = vec![0u32; pixels.len()];
+    let mut next = offsets.clone();
+    for (k, &b) in band_of.iter().enumerate() {
+        by_band[next[b as usize]] = k as u32;
+        next[b as usize] += 1;
+    }
+    drop(band_of);
+    let mut out = vec![[0.0; 3]; pixels.len()];
+    for band in offsets.windows(2).map(|w| &by_band[w[0]..w[1]]) {
+        if band.is_empty() {
+            continue;
+        }
+        let band_pixels: Vec<usize> = band.iter().map(|&k| pixels[k as usize]).collect();
+        // A pixel's other sub-samples may see texels just past the band.
+        let (first, last) = (band_pixels.iter().flat_map(|&p| lit(p)).map(texel_of))
+            .fold((usize::MAX, 0), |(a, b), t| (a.min(t), b.max(t)));
         let lobes = TexelLobe::of_texels(maps, first.min(last)..last + 1);
-        // Each pixel draws from its own stream, so chunks leave the values as they were.
-        out.extend(accumulate(records, chunk, [0.0; 3], seed, |_, s, rng| {
+        // Each pixel draws from its own stream, so the bands leave the values as they were.
+        let values = accumulate(records, &band_pixels, [0.0; 3], seed, |_, s, rng| {
             let lobe = &lobes[texel_of(s) - first];
             let (wi, wo) = (Vec3::from_f64(records.wi[s]), Vec3::from_f64(records.wo[s]));
             // The records' irradiance holds the geometric cosine wi.z: replaced by the shading
@@ -50,15 +76,19 @@ pub fn render_maps(
             };
             let cosine_ratio = i.z / wi.z;
             Rgb(lobe.value(i, o, rng).map(|v| v * cosine_ratio))
-        }));
+        });
+        for (&k, value) in band.iter().zip(values) {
+            out[k as usize] = value;
+        }
     }
     Ok(out)
 }
 
-/// Pixels [`render_maps`] renders at a time, building the lobes of the texels they see for
-/// each chunk: a `tabulated` texel's lobe is about 2 kB, so the lobes of every texel of a
-/// 1024^2 grid took 2 GB at once, more than the fit itself.
-const LOBE_CHUNK_PIXELS: usize = 1 << 16;
+/// Texels whose lobes [`render_maps`] holds at a time: it renders the pixels that see each band
+/// of this many texels (in row-major order) with that band's lobes, built once. A `tabulated`
+/// texel's lobe is about 2 kB, so the lobes of every texel of a 1024^2 grid took 2 GB at once,
+/// more than the fit itself.
+const LOBE_BAND_TEXELS: usize = 1 << 16;
 
 /// Predicted radiance of every pixel of every photo for a uniform or maps material.
 pub fn render_any(
