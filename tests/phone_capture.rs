@@ -236,7 +236,27 @@ fn photos_without_tags_or_flash_are_left_out_by_name_and_too_few_refuse() {
         stderr.contains("1 of 3 photos usable, 3 needed"),
         "{stderr}"
     );
-    assert!(!set.exists(), "nothing is written when the run refuses");
+    assert!(
+        !set.exists(),
+        "no photo set is written when the run refuses"
+    );
+    // Its report is, beside the output, to diagnose from.
+    let refused = dir.path().join("set.capture-report.json");
+    assert!(stderr.contains(refused.to_str().unwrap()), "{stderr}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&refused).unwrap()).unwrap();
+    let reasons: Vec<&str> = report["photos"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["left_out"].as_str().unwrap_or("used"))
+        .collect();
+    assert_eq!(reasons[0], "used", "{reasons:?}");
+    assert!(reasons[1].starts_with("the flash explains"), "{reasons:?}");
+    assert!(
+        reasons[2].starts_with("0 of the board's tags"),
+        "{reasons:?}"
+    );
 
     // Bad board files name the file and the field.
     let broken = dir.path().join("broken.toml");

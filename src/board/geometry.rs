@@ -84,6 +84,18 @@ fn apply(h: &Matrix3<f64>, p: [f64; 2]) -> [f64; 2] {
     [v.x / v.z, v.y / v.z]
 }
 
+/// Sum of squared distances in pixels between the observed image points and the board points
+/// mapped by the homography `h` (the transfer error, Hartley & Zisserman 2003, eq. 4.6).
+pub fn transfer_error(h: &Matrix3<f64>, points: &[Correspondence]) -> f64 {
+    points
+        .iter()
+        .map(|p| {
+            let q = apply(h, p.board);
+            (q[0] - p.image[0]).powi(2) + (q[1] - p.image[1]).powi(2)
+        })
+        .sum()
+}
+
 /// The homography `H` with `image ~ H (board, 1)` from at least four correspondences (DLT on
 /// normalised coordinates); `None` when they are degenerate (collinear, too few).
 pub fn homography(points: &[Correspondence]) -> Option<Matrix3<f64>> {

@@ -2,29 +2,47 @@
 //! the tags, fit each photo's homography, find the focal length and the camera poses, put the
 //! flash at the lens, check each photo, and resample the sample window.
 //!
+//! Before any pose, how the board was printed is fitted over all photos ([`fit_print`]): the
+//! quarter turn of the tags' patterns (OpenCV's `generateImageMarker` prints the AprilTag
+//! reference turned by 180 degrees) and the printed tags' size relative to their spacing (a
+//! home print's black squares come out a few percent off: 0.978 on the real board frames of
+//! `shared/data/real_board`).
+//!
 //! What each photo must pass, else it is left out with the reason named:
 //! - at least [`MIN_TAGS`] of the board's tags found (too few: out of frame, out of focus);
-//! - reprojection error of the refined pose below [`MAX_RMS_PX`] (a blurred or bent board);
-//! - lit by its flash: the white paper of the tags' quiet zones must follow the flash's
-//!   `cos / d^2` falloff ([`flash_share`] at least [`MIN_FLASH_SHARE`]).
+//! - a reprojection error of the refined pose that agrees with the board and the other photos
+//!   ([`reprojection_bound`]: relative to the tags' size in the photo, not a fixed pixel count);
+//! - lit by its flash: the unclipped white paper of the tags' quiet zones must follow the
+//!   flash's `cos / d^2` falloff ([`flash_share`] at least [`MIN_FLASH_SHARE`]).
 //!
 //! The run refuses (exit 2) when fewer than [`MIN_PHOTOS`] photos remain.
 
 use super::detect::{detect, TagCorners};
 use super::geometry::{
-    focal_from_homographies, homography, pose_from_homography, refine_pose, Correspondence,
-    Intrinsics, Pose,
+    focal_from_homographies, homography, pose_from_homography, refine_pose, transfer_error,
+    Correspondence, Intrinsics, Pose,
 };
 use super::Board;
+use crate::capture::image_io::srgb_to_linear;
+use crate::error::{Error, Result};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
+use std::path::Path;
 
 /// Fewest tags a usable photo shows.
 pub const MIN_TAGS: usize = 4;
-/// Largest acceptable root-mean-square reprojection error of a photo's pose, pixels.
-pub const MAX_RMS_PX: f64 = 2.0;
+/// Reprojection error (root mean square, as a share of the tags' black-square side in the
+/// photo) that is always accepted: 5%, 2 px for tags of 40 px.
+pub const ACCEPTED_RMS_OF_TAG: f64 = 0.05;
+/// Above that, a photo is kept while its error is within this factor of the photos' median: a
+/// print that is slightly bent or off its size shows in every photo alike, a blurred photo alone.
+pub const OUTLIER_FACTOR: f64 = 3.0;
+/// Beyond one module (1/8 of the black square) the board file does not describe the print.
+pub const MAX_RMS_OF_TAG: f64 = 0.125;
 /// Smallest share of the paper's brightness that the flash must explain.
 pub const MIN_FLASH_SHARE: f64 = 0.5;
+/// Fewest unclipped paper points [`flash_share`] reads.
+pub const MIN_PAPER_POINTS: usize = 8;
 /// Fewest photos a photo set needs.
 pub const MIN_PHOTOS: usize = 3;
 
@@ -42,6 +60,47 @@ pub struct PhonePhoto {
 }
 
 impl PhonePhoto {
+    /// Reads a photo upright (EXIF orientation applied), linearised from sRGB, with its
+    /// clipped pixels and its EXIF focal length; errors name the file.
+    pub fn read(path: &Path) -> Result<PhonePhoto> {
+        use image::ImageDecoder;
+        let reader = image::ImageReader::open(path)
+            .map_err(|e| Error::io(path, e))?
+            .with_guessed_format()
+            .map_err(|e| Error::io(path, e))?;
+        let mut decoder = reader
+            .into_decoder()
+            .map_err(|e| Error::invalid(path, "image", e.to_string()))?;
+        let orientation = decoder
+            .orientation()
+            .unwrap_or(image::metadata::Orientation::NoTransforms);
+        let mut image = image::DynamicImage::from_decoder(decoder)
+            .map_err(|e| Error::invalid(path, "image", e.to_string()))?;
+        image.apply_orientation(orientation);
+        let rgb = image.to_rgb8();
+        let (width, height) = (rgb.width() as usize, rgb.height() as usize);
+        let table: Vec<f32> = (0..=255)
+            .map(|v| srgb_to_linear(f64::from(v) / 255.0) as f32)
+            .collect();
+        let linear = rgb
+            .pixels()
+            .map(|p| p.0.map(|v| table[usize::from(v)]))
+            .collect();
+        let clipped = clipped_pixels(&rgb);
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        Ok(PhonePhoto {
+            name,
+            width,
+            height,
+            linear,
+            clipped,
+            exif_focal_px: exif_focal_px(path, width, height),
+        })
+    }
+
     /// 8-bit grey (sRGB-encoded luma) for the detector.
     pub fn grey(&self) -> Vec<u8> {
         self.linear
@@ -69,8 +128,12 @@ pub enum FocalSource {
 pub struct PhotoReport {
     pub name: String,
     pub tags_found: usize,
+    /// Mean side of the detected tags' black squares, pixels.
+    pub tag_side_px: Option<f64>,
     /// Root-mean-square reprojection error of the refined pose, pixels.
     pub rms_px: Option<f64>,
+    /// The largest error the photo was allowed ([`reprojection_bound`]), pixels.
+    pub rms_bound_px: Option<f64>,
     /// Camera centre in the board frame (board units).
     pub camera: Option<[f64; 3]>,
     pub flash_share: Option<f64>,
@@ -95,20 +158,122 @@ pub struct Located {
 pub struct Located3d {
     pub intrinsics: Intrinsics,
     pub focal_source: FocalSource,
+    pub print: Print,
     pub photos: Vec<Located>,
     pub reports: Vec<PhotoReport>,
 }
 
-fn correspondences(board: &Board, tags: &[TagCorners]) -> Vec<Correspondence> {
+/// How the board was printed, as the photos show it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Print {
+    /// Clockwise quarter turns (as printed) of every tag's pattern against the board file's
+    /// upright tags: 0, or 2 for OpenCV's `generateImageMarker` tags.
+    pub tag_quarter_turns: usize,
+    /// Side of the printed black squares over the board file's `tag_size`, the tags' centres
+    /// kept where the file puts them.
+    pub tag_scale: f64,
+}
+
+impl Print {
+    pub const AS_FILED: Print = Print {
+        tag_quarter_turns: 0,
+        tag_scale: 1.0,
+    };
+}
+
+/// Board point of each detected corner under `print`: a tag turned by `q` clockwise quarter
+/// turns shows its own top-left corner at the file's corner `q` (top-left, top-right, ...).
+fn correspondences(board: &Board, tags: &[TagCorners], print: Print) -> Vec<Correspondence> {
     tags.iter()
         .flat_map(|t| {
             let truth = board.corners(t.id).expect("detect keeps board tags only");
-            (0..4).map(move |i| Correspondence {
-                board: truth[i],
-                image: t.corners[i],
+            let [cx, cy] = board.tag(t.id).expect("a board tag").center;
+            (0..4).map(move |i| {
+                let [x, y] = truth[(i + print.tag_quarter_turns) % 4];
+                Correspondence {
+                    board: [
+                        cx + print.tag_scale * (x - cx),
+                        cy + print.tag_scale * (y - cy),
+                    ],
+                    image: t.corners[i],
+                }
             })
         })
         .collect()
+}
+
+/// The print that best explains every photo's tags: the quarter turn with the least total
+/// homography transfer error, then the tag scale in [0.8, 1.2] by golden-section search on the
+/// same error. Photos with fewer than [`MIN_TAGS`] tags take no part.
+pub fn fit_print(board: &Board, detected: &[Vec<TagCorners>]) -> Print {
+    let error = |print: Print| -> f64 {
+        detected
+            .iter()
+            .filter(|tags| tags.len() >= MIN_TAGS)
+            .map(|tags| {
+                let points = correspondences(board, tags, print);
+                homography(&points).map_or(f64::INFINITY, |h| transfer_error(&h, &points))
+            })
+            .sum()
+    };
+    let tag_quarter_turns = (0..4)
+        .min_by(|&a, &b| {
+            let at = |q| {
+                error(Print {
+                    tag_quarter_turns: q,
+                    tag_scale: 1.0,
+                })
+            };
+            at(a).total_cmp(&at(b))
+        })
+        .unwrap_or(0);
+    let at_scale = |tag_scale| {
+        error(Print {
+            tag_quarter_turns,
+            tag_scale,
+        })
+    };
+    let golden = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut lo, mut hi) = (0.8, 1.2);
+    while hi - lo > 1e-5 {
+        let (a, b) = (hi - golden * (hi - lo), lo + golden * (hi - lo));
+        if at_scale(a) <= at_scale(b) {
+            hi = b;
+        } else {
+            lo = a;
+        }
+    }
+    Print {
+        tag_quarter_turns,
+        tag_scale: (lo + hi) / 2.0,
+    }
+}
+
+/// Mean side in pixels of the detected tags' black squares.
+fn tag_side_px(tags: &[TagCorners]) -> f64 {
+    let sides: f64 = tags
+        .iter()
+        .map(|t| {
+            (0..4)
+                .map(|i| {
+                    let (a, b) = (t.corners[i], t.corners[(i + 1) % 4]);
+                    (a[0] - b[0]).hypot(a[1] - b[1])
+                })
+                .sum::<f64>()
+                / 4.0
+        })
+        .sum();
+    sides / tags.len().max(1) as f64
+}
+
+/// The largest reprojection error (pixels) a photo whose tags are `side_px` wide may have when
+/// the photos' median error is `median_px`: [`ACCEPTED_RMS_OF_TAG`] of the side always, up to
+/// [`OUTLIER_FACTOR`] times the median (a print off its size or slightly bent shows in every
+/// photo), never beyond [`MAX_RMS_OF_TAG`] of the side.
+pub fn reprojection_bound(side_px: f64, median_px: f64) -> f64 {
+    (ACCEPTED_RMS_OF_TAG * side_px)
+        .max(OUTLIER_FACTOR * median_px)
+        .min(MAX_RMS_OF_TAG * side_px)
 }
 
 /// Detects, calibrates and checks every photo. `focal_px` overrides EXIF and estimation.
@@ -124,7 +289,9 @@ pub fn locate(
         .map(|p| PhotoReport {
             name: p.name.clone(),
             tags_found: 0,
+            tag_side_px: None,
             rms_px: None,
+            rms_bound_px: None,
             camera: None,
             flash_share: None,
             left_out: None,
@@ -134,9 +301,13 @@ pub fn locate(
             translation: None,
         })
         .collect();
+    let detected: Vec<Vec<TagCorners>> = photos
+        .iter()
+        .map(|photo| detect(board, photo.width, photo.height, photo.grey()).unwrap_or_default())
+        .collect();
+    let print = fit_print(board, &detected);
     let mut seen: Vec<(usize, Vec<Correspondence>, Matrix3<f64>)> = Vec::new();
-    for (i, photo) in photos.iter().enumerate() {
-        let tags = detect(board, photo.width, photo.height, photo.grey()).unwrap_or_default();
+    for (i, tags) in detected.iter().enumerate() {
         reports[i].tags_found = tags.len();
         reports[i].tags = tags.iter().map(|t| (t.id, t.corners)).collect();
         if tags.len() < MIN_TAGS {
@@ -146,7 +317,8 @@ pub fn locate(
             ));
             continue;
         }
-        let points = correspondences(board, &tags);
+        reports[i].tag_side_px = Some(tag_side_px(tags));
+        let points = correspondences(board, tags, print);
         match homography(&points) {
             Some(h) => {
                 reports[i].homography =
@@ -171,7 +343,7 @@ pub fn locate(
         }
     };
     let intrinsics = Intrinsics { focal, cx, cy };
-    let mut located = Vec::new();
+    let mut posed = Vec::new();
     for (i, points, h) in seen {
         let report = &mut reports[i];
         let Some(pose) = focal
@@ -192,26 +364,53 @@ pub fn locate(
         let rv = pose.rotation.scaled_axis();
         report.rotation_vector = Some([rv.x, rv.y, rv.z]);
         report.translation = Some([pose.translation.x, pose.translation.y, pose.translation.z]);
-        if rms > MAX_RMS_PX {
-            report.left_out = Some(format!(
-                "reprojection error {rms:.2} px > {MAX_RMS_PX} px (board blurred or not flat?)"
-            ));
-            continue;
-        }
-        let share = flash_share(board, &photos[i], &intrinsics, &pose, flash_offset);
-        report.flash_share = share;
-        if share.is_none_or(|s| s < MIN_FLASH_SHARE) {
-            report.left_out = Some(match share {
-                Some(s) => format!("the flash explains {:.0}% of the paper's brightness, {:.0}% needed (flash off?)", 100.0 * s, 100.0 * MIN_FLASH_SHARE),
-                None => "too little white paper seen to check the flash".into(),
+        posed.push((i, pose, rms));
+    }
+    let mut errors: Vec<f64> = posed.iter().map(|p| p.2).collect();
+    errors.sort_by(f64::total_cmp);
+    let median_px = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
+    let mut located = Vec::new();
+    for (i, pose, rms) in posed {
+        let report = &mut reports[i];
+        let side = report.tag_side_px.unwrap_or(0.0);
+        let bound = reprojection_bound(side, median_px);
+        report.rms_bound_px = Some(bound);
+        if rms > bound {
+            report.left_out = Some(if bound >= MAX_RMS_OF_TAG * side {
+                format!(
+                    "reprojection error {rms:.2} px > {bound:.2} px, one module of the tags' \
+                     {side:.0} px side: the board file does not describe this print (another \
+                     layout or tag size?)"
+                )
+            } else {
+                format!(
+                    "reprojection error {rms:.2} px > {bound:.2} px ({:.0}% of the tags' \
+                     {side:.0} px side, or {OUTLIER_FACTOR}x the photos' median {median_px:.2} \
+                     px): board blurred or moved in this photo?",
+                    100.0 * ACCEPTED_RMS_OF_TAG
+                )
             });
             continue;
         }
-        located.push(Located { index: i, pose });
+        let share = flash_share(board, &photos[i], &intrinsics, &pose, flash_offset);
+        report.flash_share = share.as_ref().ok().copied();
+        match share {
+            Ok(s) if s >= MIN_FLASH_SHARE => located.push(Located { index: i, pose }),
+            Ok(s) => {
+                report.left_out = Some(format!(
+                    "the flash explains {:.0}% of the paper's brightness, {:.0}% needed (flash \
+                     off?)",
+                    100.0 * s,
+                    100.0 * MIN_FLASH_SHARE
+                ))
+            }
+            Err(why) => report.left_out = Some(why),
+        }
     }
     Located3d {
         intrinsics,
         focal_source,
+        print,
         photos: located,
         reports,
     }
@@ -226,18 +425,19 @@ pub fn flash_position(pose: &Pose, flash_offset: [f64; 3]) -> Vector3<f64> {
 /// board tag's quiet zone (one module around the black square) is read at several points, and
 /// its linear luminance `v` is fitted as `v = a g + b` with `g = cos / d^2` of the flash; the
 /// share is `a mean(g) / mean(v)`. Ambient light alone gives a share near 0, a flash near 1.
-/// `None` when fewer than 8 paper points are in the photo.
+/// Clipped pixels are not read: an over-exposed paper is flat where the flash is brightest.
+/// The reason, when fewer than [`MIN_PAPER_POINTS`] unclipped paper points are in the photo.
 pub fn flash_share(
     board: &Board,
     photo: &PhonePhoto,
     k: &Intrinsics,
     pose: &Pose,
     flash_offset: [f64; 3],
-) -> Option<f64> {
+) -> Result<f64, String> {
     let flash = flash_position(pose, flash_offset);
     let module = board.tag_size / super::tags::BLACK_MODULES as f64;
     let reach = board.tag_size / 2.0 + module / 2.0;
-    let mut samples = Vec::new();
+    let (mut samples, mut seen) = (Vec::new(), 0);
     for tag in &board.tags {
         for s in -3..=3 {
             let t = s as f64 / 3.0 * (reach - module / 2.0);
@@ -250,7 +450,12 @@ pub fn flash_share(
                 if c < 0.0 || r < 0.0 || c >= photo.width as f64 || r >= photo.height as f64 {
                     continue;
                 }
-                let p = photo.linear[r as usize * photo.width + c as usize];
+                let index = r as usize * photo.width + c as usize;
+                seen += 1;
+                if photo.clipped[index] {
+                    continue;
+                }
+                let p = photo.linear[index];
                 let v =
                     0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2]);
                 let to_flash = flash - Vector3::new(x, y, 0.0);
@@ -259,8 +464,16 @@ pub fn flash_share(
             }
         }
     }
-    if samples.len() < 8 {
-        return None;
+    if samples.len() < MIN_PAPER_POINTS {
+        return Err(if seen >= MIN_PAPER_POINTS {
+            format!(
+                "the white paper is clipped at {} of its {seen} points read: too little left to \
+                 check the flash (over-exposed?)",
+                seen - samples.len()
+            )
+        } else {
+            "too little white paper seen to check the flash".into()
+        });
     }
     let n = samples.len() as f64;
     let (mg, mv) = samples
@@ -270,10 +483,10 @@ pub fn flash_share(
         (a + (s.0 - mg).powi(2), b + (s.0 - mg) * (s.1 - mv))
     });
     if sgg <= 0.0 || mv <= 0.0 {
-        return Some(0.0);
+        return Ok(0.0);
     }
     let slope = sgv / sgg;
-    Some((slope * mg / mv).clamp(0.0, 1.0))
+    Ok((slope * mg / mv).clamp(0.0, 1.0))
 }
 
 /// Photo pixels next to the window's edge whose reads may blend in the paper around it.
@@ -358,4 +571,37 @@ fn bilinear(photo: &PhonePhoto, q: [f64; 2]) -> Option<([f64; 3], bool)> {
         (a[i] * (1.0 - fx) + b[i] * fx) * (1.0 - fy) + (c[i] * (1.0 - fx) + d[i] * fx) * fy
     });
     Some((value, clipped))
+}
+
+/// Focal length in pixels from EXIF `FocalLengthIn35mmFilm` (35 mm equivalent: the full frame's
+/// 43.27 mm diagonal spans the image diagonal), if present.
+fn exif_focal_px(path: &Path, width: usize, height: usize) -> Option<f64> {
+    let file = std::fs::File::open(path).ok()?;
+    let exif = exif::Reader::new()
+        .read_from_container(&mut std::io::BufReader::new(file))
+        .ok()?;
+    let field = exif.get_field(exif::Tag::FocalLengthIn35mmFilm, exif::In::PRIMARY)?;
+    let f35 = f64::from(field.value.get_uint(0)?);
+    let diagonal_px = ((width * width + height * height) as f64).sqrt();
+    (f35 > 0.0).then(|| f35 * diagonal_px / 36.0f64.hypot(24.0))
+}
+
+/// Smallest 8-bit value treated as clipped: JPEG's block transform rings around a clipped
+/// highlight, so values just below 255 next to it are not radiance either.
+const CLIPPED_FROM: u8 = 250;
+
+/// Pixels within one pixel of a channel at or above [`CLIPPED_FROM`].
+fn clipped_pixels(rgb: &image::RgbImage) -> Vec<bool> {
+    let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+    let high: Vec<bool> = rgb
+        .pixels()
+        .map(|p| p.0.iter().any(|&v| v >= CLIPPED_FROM))
+        .collect();
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            (y.saturating_sub(1)..(y + 2).min(h))
+                .any(|yy| (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| high[yy * w + xx]))
+        })
+        .collect()
 }

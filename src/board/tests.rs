@@ -37,9 +37,45 @@ pub(crate) fn photograph(
     size: [usize; 2],
     ss: usize,
 ) -> Vec<u8> {
+    photograph_print(board, |x, y| board.is_black(x, y), k, pose, size, ss)
+}
+
+/// [`photograph`] of a print whose reflectance is `is_black` (the board's own, or a print
+/// that differs from its file).
+fn photograph_print(
+    board: &Board,
+    is_black: impl Fn(f64, f64) -> Option<bool>,
+    k: &Intrinsics,
+    pose: &Pose,
+    size: [usize; 2],
+    ss: usize,
+) -> Vec<u8> {
+    let shade = |hit: Option<[f64; 2]>| match hit.map(|[x, y]| is_black(x, y)) {
+        None => 60.0,
+        Some(Some(true)) => 20.0,
+        Some(Some(false)) => 235.0,
+        Some(None) => 128.0,
+    };
+    render(board, k, pose, size, ss, shade)
+        .into_iter()
+        .map(|v| v.round() as u8)
+        .collect()
+}
+
+/// Per pixel, the mean of `shade` over `ss` x `ss` sub-samples, given the board-plane point
+/// each sees (`None` off the printed board or behind the camera).
+fn render(
+    board: &Board,
+    k: &Intrinsics,
+    pose: &Pose,
+    size: [usize; 2],
+    ss: usize,
+    shade: impl Fn(Option<[f64; 2]>) -> f64,
+) -> Vec<f64> {
     let inverse = pose.rotation.inverse();
     let center = pose.center();
-    let mut grey = Vec::with_capacity(size[0] * size[1]);
+    let e = board.extent();
+    let mut out = Vec::with_capacity(size[0] * size[1]);
     for r in 0..size[1] {
         for c in 0..size[0] {
             let mut sum = 0.0;
@@ -49,26 +85,17 @@ pub(crate) fn photograph(
                 let ray = inverse * Vector3::new((px - k.cx) / k.focal, (py - k.cy) / k.focal, 1.0);
                 let t = -center.z / ray.z;
                 let (x, y) = (center.x + t * ray.x, center.y + t * ray.y);
-                let e = board.extent();
-                sum += if t <= 0.0
-                    || x < e[0] - 1.0
-                    || x > e[1] + 1.0
-                    || y < e[2] - 1.0
-                    || y > e[3] + 1.0
-                {
-                    60.0
-                } else {
-                    match board.is_black(x, y) {
-                        Some(true) => 20.0,
-                        Some(false) => 235.0,
-                        None => 128.0,
-                    }
-                };
+                let on_board = t > 0.0
+                    && x >= e[0] - 1.0
+                    && x <= e[1] + 1.0
+                    && y >= e[2] - 1.0
+                    && y <= e[3] + 1.0;
+                sum += shade(on_board.then_some([x, y]));
             }
-            grey.push((sum / (ss * ss) as f64).round() as u8);
+            out.push(sum / (ss * ss) as f64);
         }
     }
-    grey
+    out
 }
 
 fn board() -> Board {
@@ -246,4 +273,114 @@ fn degenerate_correspondences_have_no_homography() {
         .collect();
     assert!(homography(&line).is_none());
     assert!(homography(&line[..3]).is_none());
+}
+
+/// The board as a printer that turns every tag by `quarter_turns` clockwise and scales its
+/// pattern by `scale` about its centre would print it.
+fn misprinted(
+    b: &Board,
+    quarter_turns: usize,
+    scale: f64,
+) -> impl Fn(f64, f64) -> Option<bool> + '_ {
+    move |x, y| {
+        let half = b.outer_size() / 2.0;
+        for t in &b.tags {
+            let (mut dx, mut dy) = ((x - t.center[0]) / scale, (y - t.center[1]) / scale);
+            if dx.abs() < half && dy.abs() < half {
+                // Undo the clockwise turns: a counter-clockwise quarter turn each.
+                for _ in 0..quarter_turns {
+                    (dx, dy) = (-dy, dx);
+                }
+                return b.is_black(t.center[0] + dx, t.center[1] + dy);
+            }
+        }
+        b.is_black(x, y).map(|_| false)
+    }
+}
+
+#[test]
+fn a_print_with_turned_and_shrunk_tags_is_fitted_from_its_photos() {
+    let b = board();
+    let k = Intrinsics {
+        focal: 900.0,
+        cx: 400.0,
+        cy: 300.0,
+    };
+    let eyes = [([3.0, -5.0, 30.0], 0.2), ([-6.0, 2.0, 28.0], 1.7)];
+    for (quarter_turns, scale) in [(0, 1.0), (1, 0.97), (2, 1.0), (3, 1.03)] {
+        let print = misprinted(&b, quarter_turns, scale);
+        let detected: Vec<_> = eyes
+            .iter()
+            .map(|&(eye, roll)| {
+                let grey = photograph_print(&b, &print, &k, &looking_at(eye, roll), [800, 600], 2);
+                detect(&b, 800, 600, grey).unwrap()
+            })
+            .collect();
+        assert!(detected.iter().all(|d| d.len() >= b.tags.len() - 2));
+        let fitted = phone::fit_print(&b, &detected);
+        assert_eq!(fitted.tag_quarter_turns, quarter_turns);
+        // A 45 px tag's corners are good to about 0.3 px: its side to about 1%, over ~40 tags
+        // to a few parts in a thousand.
+        assert!(
+            (fitted.tag_scale - scale).abs() < 0.003,
+            "{quarter_turns} turns: scale {} for {scale}",
+            fitted.tag_scale
+        );
+    }
+}
+
+#[test]
+fn an_over_exposed_paper_is_checked_on_its_unclipped_points() {
+    let b = board();
+    let k = Intrinsics {
+        focal: 700.0,
+        cx: 400.0,
+        cy: 300.0,
+    };
+    let pose = looking_at([7.0, -6.0, 20.0], 0.3);
+    let center = pose.center();
+    // Paper (0.8) and toner (0.04) lit by a flash at the lens: radiance albedo cos / d^2, times
+    // a gain that over-exposes most of the paper, as a phone's auto-exposure does on a dark sample.
+    let radiance = |gain: f64| {
+        render(&b, &k, &pose, [800, 600], 2, |hit| {
+            let Some([x, y]) = hit else { return 0.02 };
+            let albedo = match b.is_black(x, y) {
+                Some(true) => 0.04,
+                Some(false) => 0.8,
+                None => 0.1,
+            };
+            let to_flash = center - Vector3::new(x, y, 0.0);
+            gain * albedo * to_flash.z / to_flash.norm().powi(3)
+        })
+    };
+    let photo = |gain: f64, flag_clipped: bool| {
+        let linear: Vec<f64> = radiance(gain);
+        let clipped = linear.iter().map(|&v| flag_clipped && v >= 1.0).collect();
+        phone::PhonePhoto {
+            name: "over".into(),
+            width: 800,
+            height: 600,
+            linear: linear.iter().map(|&v| [v.min(1.0) as f32; 3]).collect(),
+            clipped,
+            exif_focal_px: None,
+        }
+    };
+    let share = |p: &phone::PhonePhoto| phone::flash_share(&b, p, &k, &pose, [0.0; 3]);
+    // Exposed right, the flash explains the paper.
+    assert!(share(&photo(300.0, true)).unwrap() > 0.9);
+    // Over-exposed: read with its clipped points the paper looks flat, as if the flash were off.
+    let (over, over_unflagged) = (photo(1200.0, true), photo(1200.0, false));
+    let clipped_paper = 1.0 - share(&over_unflagged).unwrap();
+    assert!(
+        clipped_paper > 0.5,
+        "share read through the clipping {}",
+        1.0 - clipped_paper
+    );
+    assert!(share(&over).unwrap() > 0.9, "{:?}", share(&over));
+    // All of it clipped: nothing left to check, and the reason says so.
+    let why = share(&photo(1e5, true)).unwrap_err();
+    assert!(
+        why.contains("clipped") && why.contains("over-exposed"),
+        "{why}"
+    );
 }

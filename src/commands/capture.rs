@@ -6,7 +6,7 @@ use crate::board::phone::{self, FocalSource, PhonePhoto};
 use crate::board::{print, Board};
 use crate::capture::atomic_file::write_atomically;
 use crate::capture::camera::{Camera, Pinhole, Rectified};
-use crate::capture::image_io::{srgb_to_linear, write_exr, ColorEncoding};
+use crate::capture::image_io::{write_exr, ColorEncoding};
 use crate::capture::light::Light;
 use crate::capture::{Capture, Photo, Sample};
 use crate::error::{Error, Result};
@@ -117,80 +117,7 @@ pub fn run_board(args: &BoardArgs) -> Result<()> {
     Ok(())
 }
 
-/// Focal length in pixels from EXIF `FocalLengthIn35mmFilm` (35 mm equivalent: the full frame's
-/// 43.27 mm diagonal spans the image diagonal), if present.
-fn exif_focal_px(path: &Path, width: usize, height: usize) -> Option<f64> {
-    let file = std::fs::File::open(path).ok()?;
-    let exif = exif::Reader::new()
-        .read_from_container(&mut std::io::BufReader::new(file))
-        .ok()?;
-    let field = exif.get_field(exif::Tag::FocalLengthIn35mmFilm, exif::In::PRIMARY)?;
-    let f35 = f64::from(field.value.get_uint(0)?);
-    let diagonal_px = ((width * width + height * height) as f64).sqrt();
-    (f35 > 0.0).then(|| f35 * diagonal_px / 36.0f64.hypot(24.0))
-}
-
-/// Reads a photo upright (EXIF orientation applied), linearised from sRGB.
-fn read_photo(path: &Path) -> Result<PhonePhoto> {
-    use image::ImageDecoder;
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| Error::io(path, e))?
-        .with_guessed_format()
-        .map_err(|e| Error::io(path, e))?;
-    let mut decoder = reader
-        .into_decoder()
-        .map_err(|e| Error::invalid(path, "image", e.to_string()))?;
-    let orientation = decoder
-        .orientation()
-        .unwrap_or(image::metadata::Orientation::NoTransforms);
-    let mut image = image::DynamicImage::from_decoder(decoder)
-        .map_err(|e| Error::invalid(path, "image", e.to_string()))?;
-    image.apply_orientation(orientation);
-    let rgb = image.to_rgb8();
-    let (width, height) = (rgb.width() as usize, rgb.height() as usize);
-    let table: Vec<f32> = (0..=255)
-        .map(|v| srgb_to_linear(f64::from(v) / 255.0) as f32)
-        .collect();
-    let linear = rgb
-        .pixels()
-        .map(|p| p.0.map(|v| table[usize::from(v)]))
-        .collect();
-    let clipped = clipped_pixels(&rgb);
-    let name = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    Ok(PhonePhoto {
-        name,
-        width,
-        height,
-        linear,
-        clipped,
-        exif_focal_px: exif_focal_px(path, width, height),
-    })
-}
-
 /// A mask PNG: 255 where `nonzero`, else 0.
-/// Smallest 8-bit value treated as clipped: JPEG's block transform rings around a clipped
-/// highlight, so values just below 255 next to it are not radiance either.
-const CLIPPED_FROM: u8 = 250;
-
-/// Pixels within one pixel of a channel at or above [`CLIPPED_FROM`].
-fn clipped_pixels(rgb: &image::RgbImage) -> Vec<bool> {
-    let (w, h) = (rgb.width() as usize, rgb.height() as usize);
-    let high: Vec<bool> = rgb
-        .pixels()
-        .map(|p| p.0.iter().any(|&v| v >= CLIPPED_FROM))
-        .collect();
-    (0..w * h)
-        .map(|i| {
-            let (x, y) = (i % w, i / w);
-            (y.saturating_sub(1)..(y + 2).min(h))
-                .any(|yy| (x.saturating_sub(1)..(x + 2).min(w)).any(|xx| high[yy * w + xx]))
-        })
-        .collect()
-}
-
 fn write_mask(path: &Path, nonzero: &[bool], width: usize, height: usize) -> Result<()> {
     let bytes = nonzero.iter().map(|&k| if k { 255 } else { 0 }).collect();
     let image = image::GrayImage::from_raw(width as u32, height as u32, bytes).expect("mask size");
@@ -334,6 +261,35 @@ fn write_photo_set(
     capture.save_manifest(&dir.join("capture.toml"))
 }
 
+/// `capture-report.json`: the camera found and what happened to every photo.
+fn capture_report(located: &phone::Located3d, args: &CaptureArgs) -> serde_json::Value {
+    let k = located.intrinsics;
+    serde_json::json!({
+        "focal_px": k.focal,
+        "focal_source": match located.focal_source { FocalSource::Given => "given", FocalSource::Exif => "exif", FocalSource::Board => "board" },
+        "principal_point": [k.cx, k.cy],
+        "print": located.print,
+        "photos": located.reports,
+        "sources": args.photos,
+    })
+}
+
+/// Where a refused run's report goes: `OUT.capture-report.json` beside the output folder.
+fn refused_report_path(output: &Path) -> PathBuf {
+    let mut name = output
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_else(|| "capture".into());
+    name.push(".capture-report.json");
+    output.with_file_name(name)
+}
+
+fn write_report(path: &Path, report: &serde_json::Value) -> Result<()> {
+    write_atomically(path, |wr| {
+        serde_json::to_writer_pretty(&mut *wr, report).map_err(|e| Error::io(path, e))
+    })
+}
+
 pub fn run_capture(args: &CaptureArgs) -> Result<()> {
     let board = Board::load(&args.board)?;
     if let Some(n) = args.resolution.iter().find(|n| !(8..=8192).contains(*n)) {
@@ -354,7 +310,7 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
     let photos: Vec<PhonePhoto> = args
         .photos
         .iter()
-        .map(|p| read_photo(p))
+        .map(|p| PhonePhoto::read(p))
         .collect::<Result<_>>()?;
     if let Some(p) = photos
         .iter()
@@ -370,6 +326,23 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
         ));
     }
     let located = phone::locate(&board, &photos, args.focal_px, args.flash_offset);
+    let print = located.print;
+    if print.tag_quarter_turns != 0 {
+        eprintln!(
+            "the tags are printed turned by {} degrees clockwise against {} (OpenCV's \
+             generateImageMarker turns them by 180): read as printed",
+            90 * print.tag_quarter_turns,
+            args.board.display()
+        );
+    }
+    // Small tags (20 px) read about 1% small by the detector alone; a print off by more shows.
+    if (print.tag_scale - 1.0).abs() > 0.01 {
+        eprintln!(
+            "the tags' black squares measure {:.3} of the tag_size in {}: used as measured",
+            print.tag_scale,
+            args.board.display()
+        );
+    }
     for r in &located.reports {
         match &r.left_out {
             Some(why) => eprintln!("{}: left out: {why}", r.name),
@@ -381,14 +354,21 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
             ),
         }
     }
+    let report = capture_report(&located, args);
+    // A refused run writes no photo set, only its report beside the output folder, so that the
+    // tags, poses and reasons can be looked at; a later run that succeeds removes it.
+    let refused_report = refused_report_path(&args.output);
     if located.photos.len() < phone::MIN_PHOTOS {
+        write_report(&refused_report, &report)?;
         return Err(Error::argument(
             "photos",
             format!(
-                "{} of {} photos usable, {} needed (see the reasons above)",
+                "{} of {} photos usable, {} needed (see the reasons above; the capture report \
+                 is {})",
                 located.photos.len(),
                 photos.len(),
-                phone::MIN_PHOTOS
+                phone::MIN_PHOTOS,
+                refused_report.display()
             ),
         ));
     }
@@ -412,19 +392,12 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&args.output, e))?;
         write_photo_set(&dir, &name, &board, &photos, &located, args, longer)?;
     }
-    let k = located.intrinsics;
-    let report = serde_json::json!({
-        "focal_px": k.focal,
-        "focal_source": match located.focal_source { FocalSource::Given => "given", FocalSource::Exif => "exif", FocalSource::Board => "board" },
-        "principal_point": [k.cx, k.cy],
-        "photos": located.reports,
-        "sources": args.photos,
-    });
-    let report_path = folder.path("capture-report.json");
-    write_atomically(&report_path, |wr| {
-        serde_json::to_writer_pretty(&mut *wr, &report).map_err(|e| Error::io(&report_path, e))
-    })?;
+    write_report(&folder.path("capture-report.json"), &report)?;
     folder.commit()?;
+    if refused_report.exists() {
+        std::fs::remove_file(&refused_report).map_err(|e| Error::io(&refused_report, e))?;
+    }
+    let k = located.intrinsics;
     eprintln!(
         "wrote {} of {} photos ({}) to {}; focal {:.1} px ({:?})",
         located.photos.len(),
