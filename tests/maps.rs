@@ -186,6 +186,32 @@ fn maps_fits_recover_known_maps_and_single_bounce_predicts_worse() {
     // 0.15) as sharp as it is.
     let floor = fit["maps_fit"]["roughness_floor"].as_f64();
     assert!(floor.is_none_or(|f| f <= 0.15), "roughness floor {floor:?}");
+    // The file's top-level material describes the material, not one texel: each component is
+    // the texels' median, here the majority's (truth's median alpha), whatever texel 0 is.
+    let median = |maps: &MaterialMaps, value: &dyn Fn(&MaterialMaps, usize) -> f64| {
+        let n = maps.grid.width * maps.grid.height;
+        let mut v: Vec<f64> = (0..n).map(|t| value(maps, t)).collect();
+        v.sort_by(f64::total_cmp);
+        v[n / 2]
+    };
+    let top_alpha = fit["alpha"][0].as_f64().unwrap();
+    let fitted_median = median(&got, &|m, t| m.texel(t).alpha[0]);
+    let truth_median = median(&truth, &|m, t| m.texel(t).alpha[0]);
+    // (The map is read back from a float EXR.)
+    assert!(
+        (top_alpha / fitted_median - 1.0).abs() < 1e-6,
+        "{top_alpha} vs {fitted_median}"
+    );
+    assert!(
+        (top_alpha - truth_median).abs() < 0.03,
+        "{top_alpha} vs {truth_median}"
+    );
+    let top_f0 = fit["fresnel"]["f0"][0].as_f64().unwrap();
+    let truth_f0 = median(&truth, &|m, t| m.texel(t).fresnel.f0()[0]);
+    assert!(
+        (top_f0 - truth_f0).abs() < 0.02,
+        "F0 {top_f0} vs {truth_f0}"
+    );
 
     // The same photos fitted with the single-bounce model: the rough copper's missing multiple
     // scattering cannot be made up per texel, and the held-out photo shows it.

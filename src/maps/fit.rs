@@ -2597,14 +2597,28 @@ fn texel_uncertainty(
     }
 }
 
-/// The maps of per-texel coordinates.
+/// The maps of per-texel coordinates. Their base material (the fit file's top-level `alpha`,
+/// `fresnel`, `diffuse`) is the texels' median of each component: what the material is where
+/// most of it lies, not any one texel (every texel's own values are in the maps).
 fn to_maps(model: &TexelModel, options: &MapsFitOptions, texels: &[TexelFit]) -> MaterialMaps {
     let base_dim = model.space.dim();
     let materials: Vec<Material> = texels
         .iter()
         .map(|f| model.space.material(&f.x[..base_dim]))
         .collect();
-    let base = materials[0].clone();
+    let median = |value: &dyn Fn(&Material) -> f64| {
+        let mut values: Vec<f64> = materials.iter().map(value).collect();
+        values.sort_by(f64::total_cmp);
+        values[values.len() / 2]
+    };
+    let mut base = materials[0].clone();
+    base.alpha = std::array::from_fn(|i| median(&|m| m.alpha[i]));
+    base.diffuse = std::array::from_fn(|i| median(&|m| m.diffuse[i]));
+    if options.known_fresnel.is_none() {
+        base.fresnel = FresnelSpec::Schlick {
+            f0: std::array::from_fn(|i| median(&|m| m.fresnel.f0()[i])),
+        };
+    }
     MaterialMaps {
         grid: options.grid,
         diffuse: Some(materials.iter().map(|m| m.diffuse).collect()),
