@@ -185,6 +185,102 @@ fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
     );
 }
 
+/// A glossy paint: GGX alpha 0.25 over a coloured Lambertian base, F0 of an index 1.5 coat.
+const PAINT: &str = r#"{"model": "single", "ndf": "ggx", "height": "correlated",
+  "alpha": [0.25, 0.25], "fresnel": {"kind": "schlick", "f0": [0.04, 0.04, 0.04]},
+  "diffuse": [0.5, 0.25, 0.1]}"#;
+
+/// docs/capture.md's recipe as a new user runs it, flash power unknown: `capture` (no
+/// `--flash-intensity`) then `fit --maps`. The phone exposes every photo differently (+-15%
+/// auto-exposure); the board's white paper (albedo 0.8 in the render, `--paper-albedo`'s
+/// default) measures each photo's flash. Measured at 64^2: flash within 0.6% of the truth
+/// (2551), maps median alpha 0.247, albedo 0.500 / 0.250 / 0.102, F0 0.039; before, with the
+/// documented `--fresnel-known schlick:0.04 --fit-exposure`, alpha came out 0.15 with no
+/// diffuse, the exposure stopped at its bound of 1000.
+#[test]
+fn the_documented_recipe_recovers_a_paint_under_an_unknown_auto_exposed_flash() {
+    let dir = tempfile::tempdir().unwrap();
+    let (board, photos, set) = (
+        dir.path().join("board"),
+        dir.path().join("photos"),
+        dir.path().join("set"),
+    );
+    run_ok(&["board", "-o", board.to_str().unwrap(), "--dpi", "50"]);
+    let board_toml = board.join("board.toml");
+    let paint = dir.path().join("paint.material.json");
+    std::fs::write(&paint, PAINT).unwrap();
+    // The phone template with each photo's own auto-exposure.
+    let exposures = [1.0, 0.87, 1.12, 0.95, 1.15, 0.85, 1.05, 0.9, 1.08];
+    let mut photo = 0;
+    let template: String = std::fs::read_to_string(repo(PHONE))
+        .unwrap()
+        .lines()
+        .map(|line| {
+            if line.starts_with("light = ") {
+                photo += 1;
+                format!("{line}\nexposure = {}\n", exposures[photo - 1])
+            } else {
+                format!("{line}\n")
+            }
+        })
+        .collect();
+    assert_eq!(photo, 9);
+    let manifest = dir.path().join("auto-exposed.capture.toml");
+    std::fs::write(&manifest, template).unwrap();
+    synth(
+        &paint,
+        &manifest,
+        &photos,
+        &[
+            "--board",
+            board_toml.to_str().unwrap(),
+            "--format",
+            "phone",
+            "--noise",
+            "0.01",
+        ],
+    );
+    // What lit each photo, camera gain included: the truth the paper must measure.
+    let truth: Vec<f64> = cameras(&photos.join("capture.toml"))
+        .iter()
+        .map(|(_, exposure)| 600.0 * exposure)
+        .collect();
+    let jpegs: Vec<String> = (0..9)
+        .map(|i| {
+            photos
+                .join(format!("{i:02}.jpg"))
+                .to_str()
+                .unwrap()
+                .to_owned()
+        })
+        .collect();
+    let jpegs: Vec<&str> = jpegs.iter().map(String::as_str).collect();
+    run_ok(&capture_args(
+        &board_toml,
+        &set,
+        &jpegs,
+        &["--resolution", "64"],
+    ));
+    let report = read_json(&set.join("capture-report.json"));
+    for (photo, want) in report["photos"].as_array().unwrap().iter().zip(&truth) {
+        let got = triple(&photo["flash_intensity"]);
+        assert!(
+            got.iter().all(|g| (g / want - 1.0).abs() < 0.02),
+            "{}: flash {got:?} vs {want}",
+            photo["name"]
+        );
+    }
+    let out = tempfile::tempdir().unwrap();
+    let fit = fit_json(&set, &["--maps"], out.path());
+    let alpha = fit["alpha"][0].as_f64().unwrap();
+    assert!((alpha - 0.25).abs() < 0.01, "median alpha {alpha}");
+    let (diffuse, f0) = (triple(&fit["diffuse"]), triple(&fit["fresnel"]["f0"]));
+    for (c, want) in [0.5, 0.25, 0.1].iter().enumerate() {
+        assert!((diffuse[c] / want - 1.0).abs() < 0.04, "albedo {diffuse:?}");
+        assert!((f0[c] - 0.04).abs() < 0.005, "F0 {f0:?}");
+    }
+}
+
 #[test]
 fn photos_without_tags_or_flash_are_left_out_by_name_and_too_few_refuse() {
     let dir = tempfile::tempdir().unwrap();

@@ -224,6 +224,26 @@ impl Board {
         e
     }
 
+    /// Points of the white paper, a module apart, that lie at least one module (1/8 of a tag's
+    /// black square) from any black module, from the window and from the printed extent's
+    /// edge: where a photo reads the paper alone, whatever its blur.
+    pub fn paper_points(&self) -> Vec<[f64; 2]> {
+        let module = self.tag_size / tags::BLACK_MODULES as f64;
+        let [x0, x1, y0, y1] = self.extent();
+        let (nx, ny) = (((x1 - x0) / module) as usize, ((y1 - y0) / module) as usize);
+        let white = |x: f64, y: f64| {
+            x >= x0 && x <= x1 && y >= y0 && y <= y1 && self.is_black(x, y) == Some(false)
+        };
+        (0..=ny)
+            .flat_map(|j| (0..=nx).map(move |i| [x0 + i as f64 * module, y0 + j as f64 * module]))
+            .filter(|&[x, y]| {
+                (-1..=1).all(|dj| {
+                    (-1..=1).all(|di| white(x + di as f64 * module, y + dj as f64 * module))
+                })
+            })
+            .collect()
+    }
+
     /// Printed reflectance at board point `(x, y)`: `Some(true)` on a black module, `Some(false)`
     /// on white paper (quiet zones and the paper between tags), `None` inside the window.
     pub fn is_black(&self, x: f64, y: f64) -> Option<bool> {

@@ -13,7 +13,7 @@
 //! - a reprojection error of the refined pose that agrees with the board and the other photos
 //!   ([`reprojection_bound`]: relative to the tags' size in the photo, not a fixed pixel count);
 //! - lit by its flash: the unclipped white paper of the tags' quiet zones must follow the
-//!   flash's `cos / d^2` falloff ([`flash_share`] at least [`MIN_FLASH_SHARE`]).
+//!   flash's `cos / d^2` falloff ([`paper_flash`] at least [`MIN_FLASH_SHARE`]).
 //!
 //! The run refuses (exit 2) when fewer than [`MIN_PHOTOS`] photos remain.
 
@@ -41,7 +41,7 @@ pub const OUTLIER_FACTOR: f64 = 3.0;
 pub const MAX_RMS_OF_TAG: f64 = 0.125;
 /// Smallest share of the paper's brightness that the flash must explain.
 pub const MIN_FLASH_SHARE: f64 = 0.5;
-/// Fewest unclipped paper points [`flash_share`] reads.
+/// Fewest unclipped paper points [`paper_flash`] reads.
 pub const MIN_PAPER_POINTS: usize = 8;
 /// Fewest photos a photo set needs.
 pub const MIN_PHOTOS: usize = 3;
@@ -137,6 +137,8 @@ pub struct PhotoReport {
     /// Camera centre in the board frame (board units).
     pub camera: Option<[f64; 3]>,
     pub flash_share: Option<f64>,
+    /// The flash intensity written for the photo (measured on the paper, or as given).
+    pub flash_intensity: Option<[f64; 3]>,
     /// Why the photo was left out; `None` when it is used.
     pub left_out: Option<String>,
     /// The detected tags: id and corners in image pixels, in the board's corner order.
@@ -152,6 +154,8 @@ pub struct PhotoReport {
 pub struct Located {
     pub index: usize,
     pub pose: Pose,
+    /// The flash as the photo's paper shows it.
+    pub paper: PaperFlash,
 }
 
 /// The result of [`locate`]: intrinsics, the usable photos' poses, and a report of every photo.
@@ -294,6 +298,7 @@ pub fn locate(
             rms_bound_px: None,
             camera: None,
             flash_share: None,
+            flash_intensity: None,
             left_out: None,
             tags: Vec::new(),
             homography: None,
@@ -392,11 +397,15 @@ pub fn locate(
             });
             continue;
         }
-        let share = flash_share(board, &photos[i], &intrinsics, &pose, flash_offset);
-        report.flash_share = share.as_ref().ok().copied();
-        match share {
-            Ok(s) if s >= MIN_FLASH_SHARE => located.push(Located { index: i, pose }),
-            Ok(s) => {
+        let paper = paper_flash(board, &photos[i], &intrinsics, &pose, flash_offset);
+        report.flash_share = paper.as_ref().ok().map(|p| p.share);
+        match paper {
+            Ok(paper) if paper.share >= MIN_FLASH_SHARE => located.push(Located {
+                index: i,
+                pose,
+                paper,
+            }),
+            Ok(PaperFlash { share: s, .. }) => {
                 report.left_out = Some(format!(
                     "the flash explains {:.0}% of the paper's brightness, {:.0}% needed (flash \
                      off?)",
@@ -421,48 +430,52 @@ pub fn flash_position(pose: &Pose, flash_offset: [f64; 3]) -> Vector3<f64> {
     pose.rotation.inverse() * (Vector3::from(flash_offset) - pose.translation)
 }
 
-/// How much of the white paper's brightness a flash at the lens explains: the paper of every
-/// board tag's quiet zone (one module around the black square) is read at several points, and
-/// its linear luminance `v` is fitted as `v = a g + b` with `g = cos / d^2` of the flash; the
-/// share is `a mean(g) / mean(v)`. Ambient light alone gives a share near 0, a flash near 1.
-/// Clipped pixels are not read: an over-exposed paper is flat where the flash is brightest.
-/// The reason, when fewer than [`MIN_PAPER_POINTS`] unclipped paper points are in the photo.
-pub fn flash_share(
+/// The flash as the board's white paper shows it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PaperFlash {
+    /// Share of the paper's brightness that the flash's falloff explains (0: ambient light
+    /// alone, 1: the flash alone).
+    pub share: f64,
+    /// Per channel, the flash's radiant intensity times the camera's gain over the paper's
+    /// albedo: `pi L / (rho cos / d^2)` fitted through the origin. Divided by the paper's
+    /// albedo it is the light that renders this photo's pixel values (exposure and white
+    /// balance included).
+    pub intensity_times_albedo: [f64; 3],
+}
+
+/// The flash as the board's white paper shows it: the paper at least a module from any black
+/// module, the window and the board's edge ([`Board::paper_points`]) is read. Its linear
+/// luminance `v` is fitted as `v = a g + b` with `g = cos / d^2` of the flash, and the share is
+/// `a mean(g) / mean(v)`; each channel's `v_c = (rho / pi) I_c g` through the origin gives the
+/// intensity (Lambertian paper: `L = rho / pi E`). Clipped pixels are not read: an
+/// over-exposed paper is flat where the flash is brightest. The reason, when fewer than
+/// [`MIN_PAPER_POINTS`] unclipped paper points are in the photo.
+pub fn paper_flash(
     board: &Board,
     photo: &PhonePhoto,
     k: &Intrinsics,
     pose: &Pose,
     flash_offset: [f64; 3],
-) -> Result<f64, String> {
+) -> Result<PaperFlash, String> {
     let flash = flash_position(pose, flash_offset);
-    let module = board.tag_size / super::tags::BLACK_MODULES as f64;
-    let reach = board.tag_size / 2.0 + module / 2.0;
     let (mut samples, mut seen) = (Vec::new(), 0);
-    for tag in &board.tags {
-        for s in -3..=3 {
-            let t = s as f64 / 3.0 * (reach - module / 2.0);
-            for [dx, dy] in [[t, reach], [t, -reach], [reach, t], [-reach, t]] {
-                let (x, y) = (tag.center[0] + dx, tag.center[1] + dy);
-                let Some(q) = pose.project(k, [x, y]) else {
-                    continue;
-                };
-                let (c, r) = (q[0].floor(), q[1].floor());
-                if c < 0.0 || r < 0.0 || c >= photo.width as f64 || r >= photo.height as f64 {
-                    continue;
-                }
-                let index = r as usize * photo.width + c as usize;
-                seen += 1;
-                if photo.clipped[index] {
-                    continue;
-                }
-                let p = photo.linear[index];
-                let v =
-                    0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2]);
-                let to_flash = flash - Vector3::new(x, y, 0.0);
-                let d2 = to_flash.norm_squared();
-                samples.push((to_flash.z.max(0.0) / d2.sqrt() / d2, v));
-            }
+    for [x, y] in board.paper_points() {
+        let Some(q) = pose.project(k, [x, y]) else {
+            continue;
+        };
+        let (c, r) = (q[0].floor(), q[1].floor());
+        if c < 0.0 || r < 0.0 || c >= photo.width as f64 || r >= photo.height as f64 {
+            continue;
         }
+        let index = r as usize * photo.width + c as usize;
+        seen += 1;
+        if photo.clipped[index] {
+            continue;
+        }
+        let to_flash = flash - Vector3::new(x, y, 0.0);
+        let d2 = to_flash.norm_squared();
+        let rgb = photo.linear[index].map(f64::from);
+        samples.push((to_flash.z.max(0.0) / d2.sqrt() / d2, rgb));
     }
     if samples.len() < MIN_PAPER_POINTS {
         return Err(if seen >= MIN_PAPER_POINTS {
@@ -475,18 +488,31 @@ pub fn flash_share(
             "too little white paper seen to check the flash".into()
         });
     }
+    let luminance = |p: &[f64; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
     let n = samples.len() as f64;
-    let (mg, mv) = samples
-        .iter()
-        .fold((0.0, 0.0), |(a, b), s| (a + s.0 / n, b + s.1 / n));
-    let (sgg, sgv) = samples.iter().fold((0.0, 0.0), |(a, b), s| {
-        (a + (s.0 - mg).powi(2), b + (s.0 - mg) * (s.1 - mv))
+    let (mg, mv) = samples.iter().fold((0.0, 0.0), |(a, b), s| {
+        (a + s.0 / n, b + luminance(&s.1) / n)
     });
-    if sgg <= 0.0 || mv <= 0.0 {
-        return Ok(0.0);
-    }
-    let slope = sgv / sgg;
-    Ok((slope * mg / mv).clamp(0.0, 1.0))
+    let (sgg, sgv) = samples.iter().fold((0.0, 0.0), |(a, b), s| {
+        (
+            a + (s.0 - mg).powi(2),
+            b + (s.0 - mg) * (luminance(&s.1) - mv),
+        )
+    });
+    let share = if sgg <= 0.0 || mv <= 0.0 {
+        0.0
+    } else {
+        (sgv / sgg * mg / mv).clamp(0.0, 1.0)
+    };
+    let g2: f64 = samples.iter().map(|s| s.0 * s.0).sum();
+    let intensity_times_albedo = std::array::from_fn(|c| {
+        let gv: f64 = samples.iter().map(|s| s.0 * s.1[c]).sum();
+        std::f64::consts::PI * gv / g2.max(f64::MIN_POSITIVE)
+    });
+    Ok(PaperFlash {
+        share,
+        intensity_times_albedo,
+    })
 }
 
 /// Photo pixels next to the window's edge whose reads may blend in the paper around it.

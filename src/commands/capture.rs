@@ -60,10 +60,15 @@ pub struct CaptureArgs {
     /// forward), board units.
     #[arg(long, default_value = "0,0,0", value_parser = parse_triple)]
     pub flash_offset: [f64; 3],
-    /// Radiant intensity of the flash (RGB, W/sr in board units; a scale the fit's
-    /// --fit-exposure absorbs when unknown).
-    #[arg(long, default_value = "1,1,1", value_parser = parse_triple)]
-    pub flash_intensity: [f64; 3],
+    /// Radiant intensity of the flash (RGB, W/sr in board units, the camera's gain included).
+    /// Without it each photo's flash is measured on the board's white paper (of albedo
+    /// --paper-albedo): its exposure and white balance with it.
+    #[arg(long, value_parser = parse_triple)]
+    pub flash_intensity: Option<[f64; 3]>,
+    /// Albedo of the board's white paper (office paper 0.8-0.9), the reference that puts the
+    /// fitted albedos on an absolute scale when the flash is measured on it.
+    #[arg(long, default_value_t = 0.8)]
+    pub paper_albedo: f64,
     #[arg(long)]
     pub force: bool,
 }
@@ -154,7 +159,7 @@ fn write_photo_set(
         let flash = phone::flash_position(pose, args.flash_offset);
         let light = Light::Point {
             position: DVec3::new(flash.x, flash.y, flash.z),
-            intensity: args.flash_intensity,
+            intensity: flash_intensity(args, found),
         };
         let stem = format!("{:02}", capture_photos.len());
         let (camera, rgb, keep, saturated, size) = if args.perspective {
@@ -261,6 +266,16 @@ fn write_photo_set(
     capture.save_manifest(&dir.join("capture.toml"))
 }
 
+/// The flash of a located photo: `--flash-intensity`, else as its paper shows it.
+fn flash_intensity(args: &CaptureArgs, found: &phone::Located) -> [f64; 3] {
+    args.flash_intensity.unwrap_or_else(|| {
+        found
+            .paper
+            .intensity_times_albedo
+            .map(|i| i / args.paper_albedo)
+    })
+}
+
 /// `capture-report.json`: the camera found and what happened to every photo.
 fn capture_report(located: &phone::Located3d, args: &CaptureArgs) -> serde_json::Value {
     let k = located.intrinsics;
@@ -300,6 +315,12 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
     }
     if args.resolution.is_empty() {
         return Err(Error::argument("--resolution", "give at least one size"));
+    }
+    if !(args.paper_albedo > 0.0 && args.paper_albedo <= 1.0) {
+        return Err(Error::argument(
+            "--paper-albedo",
+            format!("must be in (0, 1], got {}", args.paper_albedo),
+        ));
     }
     if let Some(f) = args.focal_px.filter(|f| !(f.is_finite() && *f > 0.0)) {
         return Err(Error::argument(
@@ -353,6 +374,10 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
                 r.rms_px.unwrap_or(f64::NAN)
             ),
         }
+    }
+    let mut located = located;
+    for found in &located.photos {
+        located.reports[found.index].flash_intensity = Some(flash_intensity(args, found));
     }
     let report = capture_report(&located, args);
     // A refused run writes no photo set, only its report beside the output folder, so that the
