@@ -58,6 +58,19 @@ fn capture_args<'a>(
     args
 }
 
+/// The paths of `synth --format phone`'s first `n` photos in `folder`.
+fn jpegs(folder: &Path, n: usize) -> Vec<String> {
+    (0..n)
+        .map(|i| {
+            folder
+                .join(format!("{i:02}.jpg"))
+                .to_str()
+                .unwrap()
+                .to_owned()
+        })
+        .collect()
+}
+
 #[test]
 fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
     let dir = tempfile::tempdir().unwrap();
@@ -89,15 +102,7 @@ fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
     let truth = cameras(&photos.join("capture.toml"));
     let gain = truth[0].1;
     let intensity = format!("{0},{0},{0}", 600.0 * gain);
-    let jpegs: Vec<String> = (0..9)
-        .map(|i| {
-            photos
-                .join(format!("{i:02}.jpg"))
-                .to_str()
-                .unwrap()
-                .to_owned()
-        })
-        .collect();
+    let jpegs = jpegs(&photos, 9);
     let photos: Vec<&str> = jpegs.iter().map(String::as_str).collect();
     run_ok(&capture_args(
         &board_toml,
@@ -245,15 +250,7 @@ fn the_documented_recipe_recovers_a_paint_under_an_unknown_auto_exposed_flash() 
         .iter()
         .map(|(_, exposure)| 600.0 * exposure)
         .collect();
-    let jpegs: Vec<String> = (0..9)
-        .map(|i| {
-            photos
-                .join(format!("{i:02}.jpg"))
-                .to_str()
-                .unwrap()
-                .to_owned()
-        })
-        .collect();
+    let jpegs = jpegs(&photos, 9);
     let jpegs: Vec<&str> = jpegs.iter().map(String::as_str).collect();
     run_ok(&capture_args(
         &board_toml,
