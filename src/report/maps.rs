@@ -449,6 +449,7 @@ impl Page for MapsReport {
             header: [
                 "model",
                 "held-out error",
+                "with its gain calibrated",
                 "mean of other photos",
                 "training error",
                 "bases (kind alpha share)",
@@ -470,6 +471,7 @@ impl Page for MapsReport {
                     vec![
                         r.model.to_string(),
                         optional(r.holdout.as_ref().map(|h| h.relative_error)),
+                        optional(r.holdout.as_ref().map(|h| h.calibrated_error)),
                         optional(r.holdout.as_ref().and_then(|h| h.mean_photo_error)),
                         format!("{:.4}", r.train_error),
                         bases.join("; ").to_lowercase(),
@@ -480,7 +482,9 @@ impl Page for MapsReport {
                 .collect(),
             note: Some(
                 "Errors are relative RMS over pixels and channels, sqrt(sum (fit - photo)^2 / sum photo^2); \
-                 the mean of the other photos is the naive prediction of the held-out photo."
+                 with its gain calibrated: after a gain per channel for the held-out photo's own exposure \
+                 and white balance, fitted on its pixels (the material untouched); the mean of the other \
+                 photos is the naive prediction of the held-out photo."
                     .into(),
             ),
         };
