@@ -6,7 +6,7 @@ mod common;
 use bouncefit::bsdf::Model;
 use bouncefit::maps::{AnyMaterial, MaterialMaps};
 use common::maps_truth::maps_of_materials;
-use common::{png_size, read_json, repo, run_bad, run_ok, strings, synth};
+use common::{png_size, read_json, repo, run_bad, run_ok, strings, synth, triple};
 use std::path::{Path, PathBuf};
 
 /// Rough copper (the multi-bounce case: alpha 0.65) and a glossy red paint.
@@ -227,6 +227,76 @@ fn maps_fits_recover_known_maps_and_single_bounce_predicts_worse() {
         single_held_out > 1.5 * held_out,
         "single {single_held_out} vs kulla-conty {held_out}"
     );
+}
+
+/// Photos each exposed by their own gain (a phone's auto-exposure, 0.85-1.15) that the set does
+/// not record: `--photo-gains` finds every training photo's gain (relative to their geometric
+/// mean, the gauge the albedos take) within 1%, and the maps fit the photos better for it
+/// (measured at 48^2, 1% noise: training error 0.0917 without, 0.0088 with).
+#[test]
+fn photo_gains_recover_each_photos_unrecorded_exposure() {
+    let dir = tempfile::tempdir().unwrap();
+    let side = 48;
+    let exposures = [1.0, 0.87, 1.12, 0.95, 1.15, 0.85, 1.05, 0.9, 1.08, 1.0];
+    let mut photo = 0;
+    let template: String = std::fs::read_to_string(flash_template(dir.path(), side))
+        .unwrap()
+        .lines()
+        .map(|line| {
+            let mut line = format!("{line}\n");
+            if line.starts_with("light = ") {
+                line += &format!("exposure = {}\n", exposures[photo]);
+                photo += 1;
+            }
+            line
+        })
+        .collect();
+    assert_eq!(photo, 10);
+    let capture = dir.path().join("auto-exposed.capture.toml");
+    std::fs::write(&capture, template).unwrap();
+    let (_, set) = truth_set_captured(
+        truth_maps(Model::KullaConty, side),
+        dir.path(),
+        &capture,
+        &[],
+    );
+    // The set as a phone writes it: every photo at the nominal exposure.
+    let manifest = set.join("capture.toml");
+    let nominal: String = std::fs::read_to_string(&manifest)
+        .unwrap()
+        .lines()
+        .map(|line| match line.starts_with("exposure = ") {
+            true => "exposure = 1.0\n".to_string(),
+            false => format!("{line}\n"),
+        })
+        .collect();
+    std::fs::write(&manifest, nominal).unwrap();
+    let args = ["--models", "kulla-conty", "--holdout-photo", "9"];
+    let plain = fit_maps(&set, dir.path(), "plain", &args);
+    let calibrated = fit_maps(
+        &set,
+        dir.path(),
+        "gains",
+        &[&args[..], &["--photo-gains"]].concat(),
+    );
+    let training = &exposures[..9];
+    let mean = (training.iter().map(|e: &f64| e.ln()).sum::<f64>() / 9.0).exp();
+    let gains = calibrated["photo_gains"].as_array().unwrap();
+    for (i, entry) in gains.iter().enumerate() {
+        let want = if i == 9 { 1.0 } else { exposures[i] / mean };
+        let got = triple(&entry["gain"]);
+        assert!(
+            got.iter().all(|g| (g / want - 1.0).abs() < 0.01),
+            "photo {i}: gain {got:?} vs {want}"
+        );
+    }
+    let error = |fit: &serde_json::Value| fit["maps_fit"]["train_error"].as_f64().unwrap();
+    eprintln!(
+        "training error {:.4} without photo gains, {:.4} with",
+        error(&plain),
+        error(&calibrated)
+    );
+    assert!(error(&calibrated) < 0.5 * error(&plain));
 }
 
 /// Maps fits of noisy photos keep the bases' roughness: the truth rendered at 64^2 with 5%

@@ -496,6 +496,7 @@ fn maps_set(path: &Path, args: &BenchArgs, m: &MapsSettings) -> Result<MapsSet> 
         bases: m.max_bases,
         holdout_photo: Some(last),
         coarse_to_fine: CoarseToFine::default(),
+        photo_gains: false,
     };
     // Each maps fit takes the options of the first model with its own model.
     let options = args

@@ -276,6 +276,11 @@ pub struct MapsArgs {
     #[arg(long, value_parser = parse_coarse_to_fine, default_value_t = CoarseToFine::default(),
           requires = "maps")]
     pub coarse_to_fine: CoarseToFine,
+    /// Calibrate each photo's own exposure and white balance (a gain per channel, around the
+    /// set's) with the maps: fit, measure each training photo's gain against the maps, refit
+    /// under the gains (twice the time); the fit file lists them under `photo_gains`.
+    #[arg(long, requires = "maps")]
+    pub photo_gains: bool,
 }
 
 /// The largest texel grid side `--coarse-to-fine` chooses the bases on, or none.
@@ -428,6 +433,7 @@ impl FitOptionArgs {
             bases: maps.bases,
             holdout_photo: maps.holdout_photo,
             coarsest: maps.coarse_to_fine.0.map(|side| side * side),
+            photo_gains: maps.photo_gains,
         }
     }
 }

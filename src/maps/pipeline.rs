@@ -10,9 +10,9 @@ use super::{MaterialMaps, TexelGrid};
 use crate::bsdf::Model;
 use crate::capture::Capture;
 use crate::error::{Error, Result};
-use crate::fit::bayes::holdout::{check_held_out_photo, HeldOutPhoto};
+use crate::fit::bayes::holdout::{check_held_out_photo, gain, HeldOutPhoto};
 use crate::fit::pipeline::{load_records, RegionSource};
-use crate::fit::point::exposure::exposed_records;
+use crate::fit::point::exposure::{exposed_records, photo_exposed_records};
 use crate::fit::point::params::{FresnelFamily, ParamSpace};
 use crate::fit::{fit_model, FitOptions};
 use crate::loss::LossKind;
@@ -20,6 +20,11 @@ use crate::shading::ShadingRecords;
 use serde_json::json;
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
+
+/// Most refits of the maps under updated photo gains (`--photo-gains`).
+const PHOTO_GAIN_ROUNDS: usize = 4;
+/// A round whose gains moved by less than this (in `ln`) ends the refits.
+const PHOTO_GAIN_SETTLED: f64 = 0.002;
 
 /// Sub-samples per pixel of a maps fit: one, at the pixel's centre, so that each pixel sees
 /// exactly one texel.
@@ -44,6 +49,9 @@ pub struct MapsOptions {
     pub holdout_photo: Option<usize>,
     /// The most texels the bases are chosen on ([`MapsFitOptions::coarsest`]).
     pub coarsest: Option<usize>,
+    /// Calibrate each training photo's own exposure and white balance (a gain per channel)
+    /// with the maps ([`MapsSet::fit`]).
+    pub photo_gains: bool,
 }
 
 impl MapsOptions {
@@ -77,12 +85,49 @@ pub struct MapsRun<'a> {
     pub fit: MapsFit,
     /// The exposure fitted with `--fit-exposure`.
     pub exposure: Option<f64>,
+    /// Each photo's own gain per channel with `--photo-gains` (1 for the held-out photo).
+    pub photo_gains: Option<Vec<[f64; 3]>>,
     /// The set's records under that exposure (the set's own without one: at 1024^2 a copy of
     /// the records is a gigabyte).
     pub records: Cow<'a, ShadingRecords>,
     /// The maps' radiance at every pixel of every photo, the held-out one included.
     pub predicted: Vec<[f64; 3]>,
     pub holdout: Option<HeldOutPhoto>,
+}
+
+/// Each training photo's gain per channel against the maps' `predicted` radiance
+/// ([`gain`], by least squares on its pixels), divided by the training photos' geometric mean
+/// per channel: the set's exposure stays the scale of the albedos, and a photo's deviation from
+/// it (auto-exposure, white balance) is its own. The held-out photo keeps 1: its gain is never
+/// fitted with the material.
+fn photo_gains_of(
+    records: &ShadingRecords,
+    predicted: &[[f64; 3]],
+    holdout: Option<usize>,
+) -> Vec<[f64; 3]> {
+    let raw: Vec<Option<[f64; 3]>> = records
+        .photos
+        .iter()
+        .enumerate()
+        .map(|(i, photo)| {
+            let pixels: Vec<usize> = photo
+                .pixels()
+                .filter(|&p| records.weight[p] > 0.0)
+                .collect();
+            let values: Vec<[f64; 3]> = pixels.iter().map(|&p| predicted[p]).collect();
+            (Some(i) != holdout && !pixels.is_empty())
+                .then(|| gain(&values, records, &pixels))
+                .filter(|g| g.iter().all(|v| v.is_finite() && *v > 0.0))
+        })
+        .collect();
+    let fitted: Vec<&[f64; 3]> = raw.iter().flatten().collect();
+    let mean: [f64; 3] = std::array::from_fn(|c| {
+        let logs: f64 = fitted.iter().map(|g| g[c].ln()).sum();
+        (logs / fitted.len().max(1) as f64).exp()
+    });
+    raw.iter()
+        .map(|g| g.map_or([1.0; 3], |g| std::array::from_fn(|c| g[c] / mean[c])))
+        .collect()
 }
 
 /// Refuses the fit options that would change what maps are fitted but that a maps fit has no
@@ -166,29 +211,54 @@ impl MapsSet {
         } else {
             None
         };
-        let records = exposed_records(&self.records, exposure.unwrap_or(1.0));
+        let mut records = exposed_records(&self.records, exposure.unwrap_or(1.0));
         let photos = records.photos.len();
         let holdout = options.holdout_photo;
         let validation_photo = (0..photos).rev().find(|&i| Some(i) != holdout);
-        let fit = fit_maps(
-            &records,
-            &MapsFitOptions {
-                model,
-                ndf: uniform.space.ndf,
-                height: uniform.space.height,
-                known_fresnel: uniform.space.known_fresnel,
-                anisotropic: uniform.space.anisotropic,
-                grid: self.grid,
-                normals: options.normals,
-                max_bases: options.bases,
-                held_out_photo: holdout,
-                validation_photo,
-                coarsest: options.coarsest,
-                progress: uniform.progress.clone(),
-            },
-        )?;
+        let maps_options = MapsFitOptions {
+            model,
+            ndf: uniform.space.ndf,
+            height: uniform.space.height,
+            known_fresnel: uniform.space.known_fresnel,
+            anisotropic: uniform.space.anisotropic,
+            grid: self.grid,
+            normals: options.normals,
+            max_bases: options.bases,
+            held_out_photo: holdout,
+            validation_photo,
+            coarsest: options.coarsest,
+            progress: uniform.progress.clone(),
+        };
+        let mut fit = fit_maps(&records, &maps_options)?;
         let all: Vec<usize> = (0..records.pixel_count()).collect();
-        let predicted = render_maps(&fit.maps, &records, &all, uniform.seed)?;
+        let mut predicted = render_maps(&fit.maps, &records, &all, uniform.seed)?;
+        let mut photo_gains = None;
+        if options.photo_gains {
+            // Maps and gains in turn: each refit's maps absorb less of the photos' exposures,
+            // so the gains settle in a few rounds (on auto-exposed synthetic photos within 1%
+            // after three).
+            let unexposed = records.clone().into_owned();
+            let mut gains = vec![[1.0; 3]; photos];
+            for _ in 0..PHOTO_GAIN_ROUNDS {
+                let step = photo_gains_of(&records, &predicted, holdout);
+                gains = gains
+                    .iter()
+                    .zip(&step)
+                    .map(|(g, s)| std::array::from_fn(|c| g[c] * s[c]))
+                    .collect();
+                records = Cow::Owned(photo_exposed_records(&unexposed, &gains));
+                fit = fit_maps(&records, &maps_options)?;
+                predicted = render_maps(&fit.maps, &records, &all, uniform.seed)?;
+                let settled = step
+                    .iter()
+                    .flatten()
+                    .all(|s| s.ln().abs() < PHOTO_GAIN_SETTLED);
+                if settled {
+                    break;
+                }
+            }
+            photo_gains = Some(gains);
+        }
         let holdout = holdout.map(|h| {
             HeldOutPhoto::measure(&records, h, |pixels| {
                 pixels.iter().map(|&p| predicted[p]).collect()
@@ -198,6 +268,7 @@ impl MapsSet {
             model,
             fit,
             exposure,
+            photo_gains,
             records,
             predicted,
             holdout,
@@ -240,6 +311,16 @@ impl MapsSet {
         }
         if let Some(exposure) = run.exposure {
             extra.insert("exposure".into(), json!({"value": exposure}));
+        }
+        if let Some(gains) = &run.photo_gains {
+            let photos: Vec<_> = run
+                .records
+                .photos
+                .iter()
+                .zip(gains)
+                .map(|(photo, gain)| json!({"stem": photo.stem, "gain": gain}))
+                .collect();
+            extra.insert("photo_gains".into(), json!(photos));
         }
         extra.insert(
             "capture".into(),

@@ -180,7 +180,7 @@ impl HeldOutPhoto {
 
 /// Per channel, the gain `g` that minimises `sum w (g p - t)^2` over `pixels`:
 /// `sum w p t / sum w p^2` (1 where nothing is predicted).
-fn gain(predicted: &[[f64; 3]], records: &ShadingRecords, pixels: &[usize]) -> [f64; 3] {
+pub fn gain(predicted: &[[f64; 3]], records: &ShadingRecords, pixels: &[usize]) -> [f64; 3] {
     std::array::from_fn(|c| {
         let (mut pt, mut pp) = (0.0, 0.0);
         for (value, &p) in predicted.iter().zip(pixels) {

@@ -43,3 +43,19 @@ pub fn exposed_records(records: &ShadingRecords, exposure: f64) -> Cow<'_, Shadi
     }
     Cow::Owned(scaled)
 }
+
+/// `records` with every irradiance of photo `i` times `gains[i]` per channel: renders on them
+/// are the predictions under each photo's own exposure and white balance (the maps fit's
+/// `--photo-gains`).
+pub fn photo_exposed_records(records: &ShadingRecords, gains: &[[f64; 3]]) -> ShadingRecords {
+    let mut scaled = records.clone();
+    let spp = records.samples_per_pixel;
+    for (photo, gain) in records.photos.iter().zip(gains) {
+        let first = photo.first_pixel * spp;
+        let count = photo.width * photo.height * spp;
+        for e in &mut scaled.irradiance[first..first + count] {
+            *e = std::array::from_fn(|c| e[c] * gain[c]);
+        }
+    }
+    scaled
+}
