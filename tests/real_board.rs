@@ -97,7 +97,14 @@ fn located(turned: bool) -> Option<(phone::Print, Vec<phone::PhotoReport>)> {
         .iter()
         .map(|name| frame(&dir, name, &board, turned))
         .collect();
-    let located = phone::locate(&board, &photos, Some(1600.0), [0.0; 3]);
+    // Virtual straight-down views: a pinhole by construction.
+    let located = phone::locate(
+        &board,
+        &photos,
+        Some(1600.0),
+        [0.0; 3],
+        phone::Lens::Pinhole,
+    );
     Some((located.print, located.reports))
 }
 

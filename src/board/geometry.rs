@@ -17,15 +17,36 @@ pub struct Correspondence {
     pub image: [f64; 2],
 }
 
-/// Pinhole intrinsics in pixels (square pixels, no skew).
+/// Camera intrinsics in pixels: square pixels, no skew, and radial distortion `[k1, k2]` of the
+/// normalised image point `x_d = x (1 + k1 r^2 + k2 r^4)` (Zhang 2000 sec. 3.3, eq. 11-12;
+/// OpenCV's first two coefficients). `[0, 0]` is a pinhole.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Intrinsics {
     pub focal: f64,
     pub cx: f64,
     pub cy: f64,
+    pub distortion: [f64; 2],
 }
 
 impl Intrinsics {
+    /// A pinhole camera (no distortion).
+    pub fn pinhole(focal: f64, cx: f64, cy: f64) -> Intrinsics {
+        Intrinsics {
+            focal,
+            cx,
+            cy,
+            distortion: [0.0; 2],
+        }
+    }
+
+    /// The pixel of a point at normalised image coordinates `(x, y)` (`X / Z`, `Y / Z` in the
+    /// camera frame), distorted.
+    pub fn pixel(&self, x: f64, y: f64) -> [f64; 2] {
+        let r2 = x * x + y * y;
+        let s = 1.0 + r2 * (self.distortion[0] + self.distortion[1] * r2);
+        [self.focal * x * s + self.cx, self.focal * y * s + self.cy]
+    }
+
     fn matrix(&self) -> Matrix3<f64> {
         Matrix3::new(
             self.focal, 0.0, self.cx, 0.0, self.focal, self.cy, 0.0, 0.0, 1.0,
@@ -49,7 +70,7 @@ impl Pose {
     /// Image position of board point `(x, y, 0)`; `None` behind the camera.
     pub fn project(&self, k: &Intrinsics, board: [f64; 2]) -> Option<[f64; 2]> {
         let c = self.rotation * Vector3::new(board[0], board[1], 0.0) + self.translation;
-        (c.z > 0.0).then(|| [k.focal * c.x / c.z + k.cx, k.focal * c.y / c.z + k.cy])
+        (c.z > 0.0).then(|| k.pixel(c.x / c.z, c.y / c.z))
     }
 
     /// Root-mean-square distance in pixels between the observed and reprojected points.
@@ -189,49 +210,32 @@ pub fn pose_from_homography(h: &Matrix3<f64>, k: &Intrinsics) -> Option<Pose> {
     })
 }
 
-/// Levenberg-Marquardt on the reprojection error over the pose's six parameters (rotation
-/// vector and translation), forward-difference Jacobian; returns the refined pose.
-pub fn refine_pose(pose: Pose, k: &Intrinsics, points: &[Correspondence]) -> Pose {
-    let unpack = |p: &[f64; 6]| Pose {
-        rotation: Rotation3::new(Vector3::new(p[0], p[1], p[2])),
-        translation: Vector3::new(p[3], p[4], p[5]),
-    };
-    let residuals = |p: &[f64; 6]| -> Option<Vec<f64>> {
-        let pose = unpack(p);
-        let mut r = Vec::with_capacity(2 * points.len());
-        for c in points {
-            let q = pose.project(k, c.board)?;
-            r.push(q[0] - c.image[0]);
-            r.push(q[1] - c.image[1]);
-        }
-        Some(r)
-    };
-    let rv = pose.rotation.scaled_axis();
-    let mut p = [
-        rv.x,
-        rv.y,
-        rv.z,
-        pose.translation.x,
-        pose.translation.y,
-        pose.translation.z,
-    ];
+/// The board geometry's one damped least-squares loop: Levenberg-Marquardt (Hartley &
+/// Zisserman A6.2) on `residuals` over the parameters `p`, forward-difference Jacobian with step
+/// `steps[j]` for parameter `j`, Marquardt's diagonal scaling; `residuals` returns `None` where
+/// the parameters are invalid (a point behind a camera). Returns the parameters at the least
+/// sum of squares found.
+fn levenberg_marquardt(
+    mut p: Vec<f64>,
+    steps: &[f64],
+    residuals: impl Fn(&[f64]) -> Option<Vec<f64>>,
+) -> Vec<f64> {
+    let n = p.len();
     let Some(mut r) = residuals(&p) else {
-        return pose;
+        return p;
     };
     let cost = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
     let mut damping = 1e-3;
     for _ in 0..50 {
-        let scale = pose.translation.norm().max(1e-9);
-        let mut jac = DMatrix::<f64>::zeros(r.len(), 6);
-        for j in 0..6 {
-            let step = if j < 3 { 1e-7 } else { 1e-7 * scale };
-            let mut q = p;
-            q[j] += step;
+        let mut jac = DMatrix::<f64>::zeros(r.len(), n);
+        for j in 0..n {
+            let mut q = p.clone();
+            q[j] += steps[j];
             let Some(rq) = residuals(&q) else {
-                return unpack(&p);
+                return p;
             };
             for i in 0..r.len() {
-                jac[(i, j)] = (rq[i] - r[i]) / step;
+                jac[(i, j)] = (rq[i] - r[i]) / steps[j];
             }
         }
         let jt = jac.transpose();
@@ -240,16 +244,13 @@ pub fn refine_pose(pose: Pose, k: &Intrinsics, points: &[Correspondence]) -> Pos
         let mut improved = false;
         while damping < 1e12 {
             let mut a = jtj.clone();
-            for d in 0..6 {
+            for d in 0..n {
                 a[(d, d)] += damping * jtj[(d, d)].max(1e-12);
             }
             let Some(delta) = a.lu().solve(&(-&g)) else {
                 break;
             };
-            let mut q = p;
-            for d in 0..6 {
-                q[d] += delta[d];
-            }
+            let q: Vec<f64> = p.iter().zip(delta.iter()).map(|(a, b)| a + b).collect();
             match residuals(&q) {
                 Some(rq) if cost(&rq) < cost(&r) => {
                     let gain = cost(&r) - cost(&rq);
@@ -265,5 +266,102 @@ pub fn refine_pose(pose: Pose, k: &Intrinsics, points: &[Correspondence]) -> Pos
             break;
         }
     }
-    unpack(&p)
+    p
+}
+
+/// A pose as six parameters (rotation vector, translation) and back.
+fn pose_parameters(pose: &Pose) -> [f64; 6] {
+    let rv = pose.rotation.scaled_axis();
+    let t = pose.translation;
+    [rv.x, rv.y, rv.z, t.x, t.y, t.z]
+}
+
+fn pose_of(p: &[f64]) -> Pose {
+    Pose {
+        rotation: Rotation3::new(Vector3::new(p[0], p[1], p[2])),
+        translation: Vector3::new(p[3], p[4], p[5]),
+    }
+}
+
+/// Finite-difference steps of a pose's parameters: radians, and lengths on `scale`.
+fn pose_steps(scale: f64) -> [f64; 6] {
+    let t = 1e-7 * scale.max(1e-9);
+    [1e-7, 1e-7, 1e-7, t, t, t]
+}
+
+/// Image residuals (x and y per point) of `points` seen by a camera `k` at `pose`.
+fn reprojection(
+    pose: &Pose,
+    k: &Intrinsics,
+    points: &[Correspondence],
+    out: &mut Vec<f64>,
+) -> Option<()> {
+    for c in points {
+        let q = pose.project(k, c.board)?;
+        out.push(q[0] - c.image[0]);
+        out.push(q[1] - c.image[1]);
+    }
+    Some(())
+}
+
+/// Levenberg-Marquardt on the reprojection error over the pose's six parameters (rotation
+/// vector and translation); returns the refined pose.
+pub fn refine_pose(pose: Pose, k: &Intrinsics, points: &[Correspondence]) -> Pose {
+    let steps = pose_steps(pose.translation.norm());
+    let p = levenberg_marquardt(pose_parameters(&pose).to_vec(), &steps, |p| {
+        let mut r = Vec::with_capacity(2 * points.len());
+        reprojection(&pose_of(p), k, points, &mut r).map(|_| r)
+    });
+    pose_of(&p)
+}
+
+/// Standard deviations of the priors that hold a lens calibration near a centred pinhole: the
+/// principal point within 5% of the image's longer side, each distortion coefficient within
+/// 0.2, against a corner's 0.5 px.
+const PRINCIPAL_POINT_PRIOR: f64 = 0.05;
+const DISTORTION_PRIOR: f64 = 0.2;
+const CORNER_SIGMA_PX: f64 = 0.5;
+
+/// Bundle adjustment of one phone's photos of the board (Zhang 2000 sec. 3.3): the principal
+/// point, radial distortion `[k1, k2]` and, unless `fixed_focal`, the focal length shared by
+/// all photos, refined with every photo's pose on all their corners. Weak priors (above) keep
+/// the principal point near `k`'s and the distortion near none where the views do not
+/// determine them. `size` is the image's `[width, height]`.
+pub fn calibrate_lens(
+    k: Intrinsics,
+    fixed_focal: bool,
+    size: [usize; 2],
+    photos: &[(Pose, &[Correspondence])],
+) -> (Intrinsics, Vec<Pose>) {
+    let longer = size[0].max(size[1]) as f64;
+    let centre = [k.cx, k.cy];
+    let mut p = vec![k.focal, k.cx, k.cy, k.distortion[0], k.distortion[1]];
+    let mut steps = vec![1e-6 * k.focal, 1e-6 * longer, 1e-6 * longer, 1e-7, 1e-7];
+    for (pose, _) in photos {
+        p.extend(pose_parameters(pose));
+        steps.extend(pose_steps(pose.translation.norm()));
+    }
+    let intrinsics = |p: &[f64]| Intrinsics {
+        focal: if fixed_focal { k.focal } else { p[0] },
+        cx: p[1],
+        cy: p[2],
+        distortion: [p[3], p[4]],
+    };
+    let p = levenberg_marquardt(p, &steps, |p| {
+        let k = intrinsics(p);
+        let mut r = Vec::new();
+        for (i, (_, points)) in photos.iter().enumerate() {
+            reprojection(&pose_of(&p[5 + 6 * i..]), &k, points, &mut r)?;
+        }
+        let pp = CORNER_SIGMA_PX / (PRINCIPAL_POINT_PRIOR * longer);
+        r.push((p[1] - centre[0]) * pp);
+        r.push((p[2] - centre[1]) * pp);
+        r.push(p[3] * CORNER_SIGMA_PX / DISTORTION_PRIOR);
+        r.push(p[4] * CORNER_SIGMA_PX / DISTORTION_PRIOR);
+        Some(r)
+    });
+    let poses = (0..photos.len())
+        .map(|i| pose_of(&p[5 + 6 * i..]))
+        .collect();
+    (intrinsics(&p), poses)
 }

@@ -19,8 +19,8 @@
 
 use super::detect::{detect, TagCorners};
 use super::geometry::{
-    focal_from_homographies, homography, pose_from_homography, refine_pose, transfer_error,
-    Correspondence, Intrinsics, Pose,
+    calibrate_lens, focal_from_homographies, homography, pose_from_homography, refine_pose,
+    transfer_error, Correspondence, Intrinsics, Pose,
 };
 use super::Board;
 use crate::capture::image_io::srgb_to_linear;
@@ -280,6 +280,19 @@ pub fn reprojection_bound(side_px: f64, median_px: f64) -> f64 {
         .min(MAX_RMS_OF_TAG * side_px)
 }
 
+/// The camera model `capture` fits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Lens {
+    /// A pinhole at the image centre.
+    Pinhole,
+    /// Principal point and radial distortion `k1`, `k2` fitted over all photos
+    /// ([`calibrate_lens`]), from at least [`MIN_LENS_PHOTOS`] photos.
+    Calibrated,
+}
+
+/// Fewest photos a lens is calibrated from.
+pub const MIN_LENS_PHOTOS: usize = 4;
+
 /// Detects, calibrates and checks every photo. `focal_px` overrides EXIF and estimation.
 /// `flash_offset` is the flash's position in the camera frame (OpenCV axes, board units).
 pub fn locate(
@@ -287,6 +300,7 @@ pub fn locate(
     photos: &[PhonePhoto],
     focal_px: Option<f64>,
     flash_offset: [f64; 3],
+    lens: Lens,
 ) -> Located3d {
     let mut reports: Vec<PhotoReport> = photos
         .iter()
@@ -347,30 +361,52 @@ pub fn locate(
             (f, FocalSource::Board)
         }
     };
-    let intrinsics = Intrinsics { focal, cx, cy };
+    let mut intrinsics = Intrinsics::pinhole(focal, cx, cy);
     let mut posed = Vec::new();
     for (i, points, h) in seen {
-        let report = &mut reports[i];
         let Some(pose) = focal
             .is_finite()
             .then(|| pose_from_homography(&h, &intrinsics))
             .flatten()
         else {
-            report.left_out = Some(
+            reports[i].left_out = Some(
                 "no focal length: give --focal-px (the views are too alike to estimate it)".into(),
             );
             continue;
         };
-        let pose = refine_pose(pose, &intrinsics, &points);
-        let rms = pose.rms_error(&intrinsics, &points);
-        let c = pose.center();
-        report.rms_px = Some(rms);
-        report.camera = Some([c.x, c.y, c.z]);
-        let rv = pose.rotation.scaled_axis();
-        report.rotation_vector = Some([rv.x, rv.y, rv.z]);
-        report.translation = Some([pose.translation.x, pose.translation.y, pose.translation.z]);
-        posed.push((i, pose, rms));
+        posed.push((i, refine_pose(pose, &intrinsics, &points), points));
     }
+    // The lens from the photos whose pinhole poses fit the board to within a module.
+    let fitting: Vec<(Pose, &[Correspondence])> = posed
+        .iter()
+        .filter(|(i, pose, points)| {
+            let side = reports[*i].tag_side_px.unwrap_or(0.0);
+            pose.rms_error(&intrinsics, points) <= MAX_RMS_OF_TAG * side
+        })
+        .map(|(_, pose, points)| (*pose, points.as_slice()))
+        .collect();
+    if lens == Lens::Calibrated && fitting.len() >= MIN_LENS_PHOTOS {
+        let size = photos.first().map_or([0, 0], |p| [p.width, p.height]);
+        let fixed_focal = focal_source == FocalSource::Given;
+        intrinsics = calibrate_lens(intrinsics, fixed_focal, size, &fitting).0;
+        for (_, pose, points) in &mut posed {
+            *pose = refine_pose(*pose, &intrinsics, points);
+        }
+    }
+    let posed: Vec<(usize, Pose, f64)> = posed
+        .into_iter()
+        .map(|(i, pose, points)| {
+            let rms = pose.rms_error(&intrinsics, &points);
+            let report = &mut reports[i];
+            let c = pose.center();
+            report.rms_px = Some(rms);
+            report.camera = Some([c.x, c.y, c.z]);
+            let rv = pose.rotation.scaled_axis();
+            report.rotation_vector = Some([rv.x, rv.y, rv.z]);
+            report.translation = Some([pose.translation.x, pose.translation.y, pose.translation.z]);
+            (i, pose, rms)
+        })
+        .collect();
     let mut errors: Vec<f64> = posed.iter().map(|p| p.2).collect();
     errors.sort_by(f64::total_cmp);
     let median_px = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
@@ -597,6 +633,48 @@ fn bilinear(photo: &PhonePhoto, q: [f64; 2]) -> Option<([f64; 3], bool)> {
         (a[i] * (1.0 - fx) + b[i] * fx) * (1.0 - fy) + (c[i] * (1.0 - fx) + d[i] * fx) * fy
     });
     Some((value, clipped))
+}
+
+/// What a lens with radial distortion `[k1, k2]` ([`Intrinsics::pixel`]) makes of a pinhole
+/// image `rgb` (`size` pixels, focal `focal`, principal point `principal`): each pixel reads the
+/// pinhole image, bilinearly, where its undistorted ray lands (the distortion inverted by
+/// fixed-point iteration); black where that is outside. `synth --distortion` uses it to make
+/// the photos `capture` calibrates a lens from.
+pub fn distorted(
+    rgb: &[[f64; 3]],
+    size: [usize; 2],
+    focal: f64,
+    principal: [f64; 2],
+    distortion: [f64; 2],
+) -> Vec<[f64; 3]> {
+    let [w, h] = size;
+    let at = |x: usize, y: usize| rgb[y * w + x];
+    (0..w * h)
+        .map(|i| {
+            let xd = ((i % w) as f64 + 0.5 - principal[0]) / focal;
+            let yd = ((i / w) as f64 + 0.5 - principal[1]) / focal;
+            let (mut x, mut y) = (xd, yd);
+            for _ in 0..20 {
+                let r2 = x * x + y * y;
+                let s = 1.0 + r2 * (distortion[0] + distortion[1] * r2);
+                (x, y) = (xd / s, yd / s);
+            }
+            let (u, v) = (
+                x * focal + principal[0] - 0.5,
+                y * focal + principal[1] - 0.5,
+            );
+            if !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f64 && v <= (h - 1) as f64) {
+                return [0.0; 3];
+            }
+            let (x0, y0) = (u.floor() as usize, v.floor() as usize);
+            let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+            let (fx, fy) = (u - x0 as f64, v - y0 as f64);
+            let (a, b, c, d) = (at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1));
+            std::array::from_fn(|k| {
+                (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
+            })
+        })
+        .collect()
 }
 
 /// Focal length in pixels from EXIF `FocalLengthIn35mmFilm` (35 mm equivalent: the full frame's

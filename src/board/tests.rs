@@ -154,11 +154,7 @@ fn printed_board_is_read_back_by_the_detector_with_every_tag() {
 #[test]
 fn oblique_rolled_photos_give_corners_in_the_boards_order() {
     let b = board();
-    let k = Intrinsics {
-        focal: 700.0,
-        cx: 320.0,
-        cy: 240.0,
-    };
+    let k = Intrinsics::pinhole(700.0, 320.0, 240.0);
     for (eye, roll) in [
         ([4.0, -6.0, 30.0], 0.3),
         ([-8.0, 3.0, 28.0], 2.0),
@@ -221,11 +217,7 @@ fn correspondences(
 #[test]
 fn homography_focal_and_pose_recover_a_known_camera() {
     let b = board();
-    let truth_k = Intrinsics {
-        focal: 1500.0,
-        cx: 960.0,
-        cy: 720.0,
-    };
+    let truth_k = Intrinsics::pinhole(1500.0, 960.0, 720.0);
     let eyes = [
         [5.0, -8.0, 30.0],
         [-9.0, 2.0, 27.0],
@@ -301,11 +293,7 @@ fn misprinted(
 #[test]
 fn a_print_with_turned_and_shrunk_tags_is_fitted_from_its_photos() {
     let b = board();
-    let k = Intrinsics {
-        focal: 900.0,
-        cx: 400.0,
-        cy: 300.0,
-    };
+    let k = Intrinsics::pinhole(900.0, 400.0, 300.0);
     let eyes = [([3.0, -5.0, 30.0], 0.2), ([-6.0, 2.0, 28.0], 1.7)];
     for (quarter_turns, scale) in [(0, 1.0), (1, 0.97), (2, 1.0), (3, 1.03)] {
         let print = misprinted(&b, quarter_turns, scale);
@@ -332,11 +320,7 @@ fn a_print_with_turned_and_shrunk_tags_is_fitted_from_its_photos() {
 #[test]
 fn an_over_exposed_paper_is_checked_on_its_unclipped_points() {
     let b = board();
-    let k = Intrinsics {
-        focal: 700.0,
-        cx: 400.0,
-        cy: 300.0,
-    };
+    let k = Intrinsics::pinhole(700.0, 400.0, 300.0);
     let pose = looking_at([7.0, -6.0, 20.0], 0.3);
     let center = pose.center();
     // Paper (0.8) and toner (0.04) lit by a flash at the lens: radiance albedo cos / d^2, times

@@ -56,6 +56,11 @@ pub struct CaptureArgs {
     /// Focal length in pixels (overrides EXIF; without either it is estimated from the board).
     #[arg(long)]
     pub focal_px: Option<f64>,
+    /// The lens: `calibrated` fits the principal point and radial distortion (k1, k2) over all
+    /// photos (from 4 photos; the focal length too unless --focal-px), `pinhole` takes a
+    /// pinhole at the image centre. `--perspective` always takes the pinhole.
+    #[arg(long, value_enum, default_value = "calibrated")]
+    pub lens: phone::Lens,
     /// The flash's position relative to the lens in the camera frame (x right, y down, z
     /// forward), board units.
     #[arg(long, default_value = "0,0,0", value_parser = parse_triple)]
@@ -88,7 +93,7 @@ fn parse_numbers<const N: usize>(text: &str) -> std::result::Result<[f64; N], St
     }
 }
 
-fn parse_pair(text: &str) -> std::result::Result<[f64; 2], String> {
+pub(super) fn parse_pair(text: &str) -> std::result::Result<[f64; 2], String> {
     parse_numbers(text)
 }
 
@@ -283,6 +288,7 @@ fn capture_report(located: &phone::Located3d, args: &CaptureArgs) -> serde_json:
         "focal_px": k.focal,
         "focal_source": match located.focal_source { FocalSource::Given => "given", FocalSource::Exif => "exif", FocalSource::Board => "board" },
         "principal_point": [k.cx, k.cy],
+        "distortion": k.distortion,
         "print": located.print,
         "photos": located.reports,
         "sources": args.photos,
@@ -346,7 +352,13 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
             ),
         ));
     }
-    let located = phone::locate(&board, &photos, args.focal_px, args.flash_offset);
+    // A perspective set keeps the photos as they are, which a pinhole camera must then describe.
+    let lens = if args.perspective {
+        phone::Lens::Pinhole
+    } else {
+        args.lens
+    };
+    let located = phone::locate(&board, &photos, args.focal_px, args.flash_offset, lens);
     let print = located.print;
     if print.tag_quarter_turns != 0 {
         eprintln!(

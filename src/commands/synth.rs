@@ -4,6 +4,7 @@
 use super::images::write_photo_images;
 use super::inputs::{load_any_material, open_capture};
 use super::output::StagedFolder;
+use crate::capture::camera::Camera;
 use crate::capture::image_io::display_exposure;
 use crate::capture::image_io::ColorEncoding;
 use crate::error::{Error, Result};
@@ -46,6 +47,11 @@ pub struct SynthArgs {
     /// where the cameras see the board plane outside the sample (for `bouncefit capture`).
     #[arg(long)]
     pub board: Option<PathBuf>,
+    /// Radial distortion K1,K2 of the phone's lens (`--format phone`, pinhole cameras with
+    /// square pixels): each photo is rendered through a pinhole and then distorted as
+    /// `capture --lens calibrated` models it (K1 < 0: barrel).
+    #[arg(long, value_parser = super::capture::parse_pair)]
+    pub distortion: Option<[f64; 2]>,
     /// JPEG quality of `--format phone`.
     #[arg(long, default_value_t = 92)]
     pub jpeg_quality: u8,
@@ -99,6 +105,36 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
         let paper = crate::board::paper::paper_radiance(&board, &capture, args.pixel_samples);
         for (p, q) in pixels.iter_mut().zip(paper) {
             *p = std::array::from_fn(|i| p[i] + q[i]);
+        }
+    }
+    if let Some(distortion) = args.distortion {
+        if args.format != SynthFormat::Phone {
+            return Err(Error::argument(
+                "--distortion",
+                "distorts phone photos: give --format phone",
+            ));
+        }
+        for (photo, span) in capture.photos.iter().zip(&records.photos) {
+            let Camera::Pinhole(pinhole) = &photo.camera else {
+                return Err(Error::argument(
+                    "--distortion",
+                    "distorts the photos of pinhole cameras only",
+                ));
+            };
+            if pinhole.fx != pinhole.fy {
+                return Err(Error::argument(
+                    "--distortion",
+                    "distorts the photos of cameras with square pixels (fx = fy) only",
+                ));
+            }
+            let image = crate::board::phone::distorted(
+                &pixels[span.pixels()],
+                [span.width, span.height],
+                pinhole.fx,
+                [pinhole.cx, pinhole.cy],
+                distortion,
+            );
+            pixels[span.pixels()].copy_from_slice(&image);
         }
     }
     if args.noise > 0.0 {
