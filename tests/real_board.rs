@@ -93,18 +93,19 @@ fn frame(dir: &std::path::Path, name: &str, board: &Board, turned: bool) -> Phon
 fn located(turned: bool) -> Option<(phone::Print, Vec<phone::PhotoReport>)> {
     let dir = common::shared("data/real_board/yellow_box")?;
     let board = board(&dir);
-    let photos: Vec<PhonePhoto> = FRAMES
+    let mut photos: Vec<PhonePhoto> = FRAMES
         .iter()
         .map(|name| frame(&dir, name, &board, turned))
         .collect();
-    // Virtual straight-down views: a pinhole by construction.
-    let located = phone::locate(
-        &board,
-        &photos,
-        Some(1600.0),
-        [0.0; 3],
-        phone::Lens::Pinhole,
-    );
+    // Virtual straight-down views: a pinhole by construction, and their paper lit by a flash
+    // that is not at the virtual lens.
+    let options = phone::LocateOptions {
+        focal_px: Some(1600.0),
+        flash_offset: [0.0; 3],
+        lens: phone::Lens::Pinhole,
+        vignetting: phone::VignettingModel::None,
+    };
+    let located = phone::locate(&board, &mut photos, options);
     Some((located.print, located.reports))
 }
 

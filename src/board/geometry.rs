@@ -47,6 +47,12 @@ impl Intrinsics {
         [self.focal * x * s + self.cx, self.focal * y * s + self.cy]
     }
 
+    /// The squared normalised distance from the principal point of pixel position `(x, y)`
+    /// (the distorted image's `r^2`).
+    pub fn radius2(&self, x: f64, y: f64) -> f64 {
+        ((x - self.cx).powi(2) + (y - self.cy).powi(2)) / (self.focal * self.focal)
+    }
+
     fn matrix(&self) -> Matrix3<f64> {
         Matrix3::new(
             self.focal, 0.0, self.cx, 0.0, self.focal, self.cy, 0.0, 0.0, 1.0,
@@ -215,7 +221,7 @@ pub fn pose_from_homography(h: &Matrix3<f64>, k: &Intrinsics) -> Option<Pose> {
 /// `steps[j]` for parameter `j`, Marquardt's diagonal scaling; `residuals` returns `None` where
 /// the parameters are invalid (a point behind a camera). Returns the parameters at the least
 /// sum of squares found.
-fn levenberg_marquardt(
+pub(super) fn levenberg_marquardt(
     mut p: Vec<f64>,
     steps: &[f64],
     residuals: impl Fn(&[f64]) -> Option<Vec<f64>>,

@@ -101,6 +101,16 @@ impl PhonePhoto {
         })
     }
 
+    /// Divides the vignetting `v` of a lens `k` out of the linear values.
+    pub fn devignette(&mut self, k: &Intrinsics, v: Vignetting) {
+        let width = self.width;
+        for (i, p) in self.linear.iter_mut().enumerate() {
+            let (c, r) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
+            let factor = v.factor(k.radius2(c, r)).max(1e-3) as f32;
+            *p = p.map(|value| value / factor);
+        }
+    }
+
     /// 8-bit grey (sRGB-encoded luma) for the detector.
     pub fn grey(&self) -> Vec<u8> {
         self.linear
@@ -161,6 +171,8 @@ pub struct Located {
 /// The result of [`locate`]: intrinsics, the usable photos' poses, and a report of every photo.
 pub struct Located3d {
     pub intrinsics: Intrinsics,
+    /// The vignetting taken out of the photos ([`Vignetting::NONE`] without).
+    pub vignetting: Vignetting,
     pub focal_source: FocalSource,
     pub print: Print,
     pub photos: Vec<Located>,
@@ -290,18 +302,34 @@ pub enum Lens {
     Calibrated,
 }
 
+/// Whether `capture` fits the lens's vignetting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum VignettingModel {
+    /// None: the photos as they are.
+    None,
+    /// Fitted on the white paper of the photos ([`fit_vignetting`]) and divided out of them,
+    /// from at least [`MIN_LENS_PHOTOS`] photos.
+    Calibrated,
+}
+
+/// How [`locate`] calibrates the photos.
+#[derive(Clone, Copy, Debug)]
+pub struct LocateOptions {
+    /// The focal length in pixels: overrides EXIF and estimation.
+    pub focal_px: Option<f64>,
+    /// The flash's position in the camera frame (OpenCV axes, board units).
+    pub flash_offset: [f64; 3],
+    pub lens: Lens,
+    pub vignetting: VignettingModel,
+}
+
 /// Fewest photos a lens is calibrated from.
 pub const MIN_LENS_PHOTOS: usize = 4;
 
-/// Detects, calibrates and checks every photo. `focal_px` overrides EXIF and estimation.
-/// `flash_offset` is the flash's position in the camera frame (OpenCV axes, board units).
-pub fn locate(
-    board: &Board,
-    photos: &[PhonePhoto],
-    focal_px: Option<f64>,
-    flash_offset: [f64; 3],
-    lens: Lens,
-) -> Located3d {
+/// Detects, calibrates and checks every photo; the vignetting it finds is taken out of the
+/// photos in place ([`PhonePhoto::devignette`]).
+pub fn locate(board: &Board, photos: &mut [PhonePhoto], options: LocateOptions) -> Located3d {
+    let LocateOptions { focal_px, lens, .. } = options;
     let mut reports: Vec<PhotoReport> = photos
         .iter()
         .map(|p| PhotoReport {
@@ -410,7 +438,7 @@ pub fn locate(
     let mut errors: Vec<f64> = posed.iter().map(|p| p.2).collect();
     errors.sort_by(f64::total_cmp);
     let median_px = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
-    let mut located = Vec::new();
+    let mut geometric = Vec::new();
     for (i, pose, rms) in posed {
         let report = &mut reports[i];
         let side = report.tag_side_px.unwrap_or(0.0);
@@ -433,9 +461,33 @@ pub fn locate(
             });
             continue;
         }
-        let paper = paper_flash(board, &photos[i], &intrinsics, &pose, flash_offset);
-        report.flash_share = paper.as_ref().ok().map(|p| p.share);
-        match paper {
+        geometric.push((i, pose));
+    }
+    // The vignetting from the paper of the photos that pass, then taken out of every photo.
+    let flash_offset = options.flash_offset;
+    let paper = |photos: &[PhonePhoto], i: usize, pose: &Pose| {
+        paper_flash(board, &photos[i], &intrinsics, pose, flash_offset)
+    };
+    let mut vignetting = Vignetting::NONE;
+    if options.vignetting == VignettingModel::Calibrated {
+        let lit: Vec<Vec<PaperRead>> = geometric
+            .iter()
+            .filter(|(i, pose)| paper(photos, *i, pose).is_ok_and(|p| p.share >= MIN_FLASH_SHARE))
+            .map(|(i, pose)| paper_reads(board, &photos[*i], &intrinsics, pose, flash_offset).0)
+            .collect();
+        if lit.len() >= MIN_LENS_PHOTOS {
+            vignetting = fit_vignetting(&lit);
+            photos
+                .iter_mut()
+                .for_each(|photo| photo.devignette(&intrinsics, vignetting));
+        }
+    }
+    let mut located = Vec::new();
+    for (i, pose) in geometric {
+        let report = &mut reports[i];
+        let measured = paper(photos, i, &pose);
+        report.flash_share = measured.as_ref().ok().map(|p| p.share);
+        match measured {
             Ok(paper) if paper.share >= MIN_FLASH_SHARE => located.push(Located {
                 index: i,
                 pose,
@@ -454,6 +506,7 @@ pub fn locate(
     }
     Located3d {
         intrinsics,
+        vignetting,
         focal_source,
         print,
         photos: located,
@@ -464,6 +517,102 @@ pub fn locate(
 /// The flash position in the board frame for a camera at `pose`.
 pub fn flash_position(pose: &Pose, flash_offset: [f64; 3]) -> Vector3<f64> {
     pose.rotation.inverse() * (Vector3::from(flash_offset) - pose.translation)
+}
+
+/// One read of the board's white paper.
+#[derive(Clone, Copy, Debug)]
+pub struct PaperRead {
+    /// The flash's `cos / d^2` at the paper point.
+    pub falloff: f64,
+    /// The photo's linear RGB there.
+    pub rgb: [f64; 3],
+    /// The pixel's squared normalised distance from the principal point (as the lens's `r^2`).
+    pub radius2: f64,
+}
+
+/// The photo's unclipped reads of the paper points ([`Board::paper_points`]) it sees, and how
+/// many it sees clipped or not.
+pub fn paper_reads(
+    board: &Board,
+    photo: &PhonePhoto,
+    k: &Intrinsics,
+    pose: &Pose,
+    flash_offset: [f64; 3],
+) -> (Vec<PaperRead>, usize) {
+    let flash = flash_position(pose, flash_offset);
+    let (mut reads, mut seen) = (Vec::new(), 0);
+    for [x, y] in board.paper_points() {
+        let Some(q) = pose.project(k, [x, y]) else {
+            continue;
+        };
+        let (c, r) = (q[0].floor(), q[1].floor());
+        if c < 0.0 || r < 0.0 || c >= photo.width as f64 || r >= photo.height as f64 {
+            continue;
+        }
+        let index = r as usize * photo.width + c as usize;
+        seen += 1;
+        if photo.clipped[index] {
+            continue;
+        }
+        let to_flash = flash - Vector3::new(x, y, 0.0);
+        let d2 = to_flash.norm_squared();
+        reads.push(PaperRead {
+            falloff: to_flash.z.max(0.0) / d2.sqrt() / d2,
+            rgb: photo.linear[index].map(f64::from),
+            radius2: k.radius2(c + 0.5, r + 0.5),
+        });
+    }
+    (reads, seen)
+}
+
+/// The lens's relative illumination `1 + a r^2 + b r^4` of the normalised image radius
+/// (vignetting; `r` as the distortion's), `[a, b]`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Vignetting(pub [f64; 2]);
+
+impl Vignetting {
+    pub const NONE: Vignetting = Vignetting([0.0; 2]);
+
+    pub fn factor(&self, radius2: f64) -> f64 {
+        1.0 + radius2 * (self.0[0] + self.0[1] * radius2)
+    }
+}
+
+/// Standard deviation of the prior on each vignetting coefficient, against a paper read's
+/// relative noise of 1%.
+const VIGNETTING_PRIOR: f64 = 0.5;
+const PAPER_READ_NOISE: f64 = 0.01;
+
+/// The vignetting the paper of several photos shows: every photo's paper is `v_c = s_c
+/// falloff V(r^2)`, with its own `s_c` (its flash, exposure and white balance, fitted in
+/// closed form) and `V` shared ([`Vignetting`]), fitted by Levenberg-Marquardt on the reads'
+/// relative residuals. The flash's falloff across the board and the lens's across the image
+/// differ as soon as the board is seen at different places in the frame.
+pub fn fit_vignetting(photos: &[Vec<PaperRead>]) -> Vignetting {
+    let residuals = |p: &[f64]| -> Option<Vec<f64>> {
+        let v = Vignetting([p[0], p[1]]);
+        let mut r = Vec::new();
+        for reads in photos {
+            let model: Vec<f64> = reads
+                .iter()
+                .map(|x| x.falloff * v.factor(x.radius2))
+                .collect();
+            let mm: f64 = model.iter().map(|m| m * m).sum();
+            for c in 0..3 {
+                let mv: f64 = reads.iter().zip(&model).map(|(x, m)| m * x.rgb[c]).sum();
+                let scale = mv / mm.max(f64::MIN_POSITIVE);
+                let mean = reads.iter().map(|x| x.rgb[c]).sum::<f64>() / reads.len() as f64;
+                for (x, m) in reads.iter().zip(&model) {
+                    r.push((x.rgb[c] - scale * m) / mean.max(f64::MIN_POSITIVE));
+                }
+            }
+        }
+        r.push(p[0] * PAPER_READ_NOISE / VIGNETTING_PRIOR);
+        r.push(p[1] * PAPER_READ_NOISE / VIGNETTING_PRIOR);
+        Some(r)
+    };
+    let p = super::geometry::levenberg_marquardt(vec![0.0, 0.0], &[1e-6, 1e-6], residuals);
+    Vignetting([p[0], p[1]])
 }
 
 /// The flash as the board's white paper shows it.
@@ -493,37 +642,19 @@ pub fn paper_flash(
     pose: &Pose,
     flash_offset: [f64; 3],
 ) -> Result<PaperFlash, String> {
-    let flash = flash_position(pose, flash_offset);
-    let (mut samples, mut seen) = (Vec::new(), 0);
-    for [x, y] in board.paper_points() {
-        let Some(q) = pose.project(k, [x, y]) else {
-            continue;
-        };
-        let (c, r) = (q[0].floor(), q[1].floor());
-        if c < 0.0 || r < 0.0 || c >= photo.width as f64 || r >= photo.height as f64 {
-            continue;
-        }
-        let index = r as usize * photo.width + c as usize;
-        seen += 1;
-        if photo.clipped[index] {
-            continue;
-        }
-        let to_flash = flash - Vector3::new(x, y, 0.0);
-        let d2 = to_flash.norm_squared();
-        let rgb = photo.linear[index].map(f64::from);
-        samples.push((to_flash.z.max(0.0) / d2.sqrt() / d2, rgb));
-    }
-    if samples.len() < MIN_PAPER_POINTS {
+    let (reads, seen) = paper_reads(board, photo, k, pose, flash_offset);
+    if reads.len() < MIN_PAPER_POINTS {
         return Err(if seen >= MIN_PAPER_POINTS {
             format!(
                 "the white paper is clipped at {} of its {seen} points read: too little left to \
                  check the flash (over-exposed?)",
-                seen - samples.len()
+                seen - reads.len()
             )
         } else {
             "too little white paper seen to check the flash".into()
         });
     }
+    let samples: Vec<(f64, [f64; 3])> = reads.iter().map(|r| (r.falloff, r.rgb)).collect();
     let luminance = |p: &[f64; 3]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
     let n = samples.len() as f64;
     let (mg, mv) = samples.iter().fold((0.0, 0.0), |(a, b), s| {

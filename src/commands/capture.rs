@@ -61,6 +61,11 @@ pub struct CaptureArgs {
     /// pinhole at the image centre. `--perspective` always takes the pinhole.
     #[arg(long, value_enum, default_value = "calibrated")]
     pub lens: phone::Lens,
+    /// The lens's vignetting: `calibrated` fits `1 + a r^2 + b r^4` on the board's white paper
+    /// over all photos (from 4 photos) and divides it out of them; `none` takes the photos as
+    /// they are.
+    #[arg(long, value_enum, default_value = "calibrated")]
+    pub vignetting: phone::VignettingModel,
     /// The flash's position relative to the lens in the camera frame (x right, y down, z
     /// forward), board units.
     #[arg(long, default_value = "0,0,0", value_parser = parse_triple)]
@@ -289,6 +294,7 @@ fn capture_report(located: &phone::Located3d, args: &CaptureArgs) -> serde_json:
         "focal_source": match located.focal_source { FocalSource::Given => "given", FocalSource::Exif => "exif", FocalSource::Board => "board" },
         "principal_point": [k.cx, k.cy],
         "distortion": k.distortion,
+        "vignetting": located.vignetting,
         "print": located.print,
         "photos": located.reports,
         "sources": args.photos,
@@ -334,7 +340,7 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
             format!("must be a positive length, got {f}"),
         ));
     }
-    let photos: Vec<PhonePhoto> = args
+    let mut photos: Vec<PhonePhoto> = args
         .photos
         .iter()
         .map(|p| PhonePhoto::read(p))
@@ -358,7 +364,16 @@ pub fn run_capture(args: &CaptureArgs) -> Result<()> {
     } else {
         args.lens
     };
-    let located = phone::locate(&board, &photos, args.focal_px, args.flash_offset, lens);
+    let located = phone::locate(
+        &board,
+        &mut photos,
+        phone::LocateOptions {
+            focal_px: args.focal_px,
+            flash_offset: args.flash_offset,
+            lens,
+            vignetting: args.vignetting,
+        },
+    );
     let print = located.print;
     if print.tag_quarter_turns != 0 {
         eprintln!(

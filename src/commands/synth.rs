@@ -4,6 +4,8 @@
 use super::images::write_photo_images;
 use super::inputs::{load_any_material, open_capture};
 use super::output::StagedFolder;
+use crate::board::geometry::Intrinsics;
+use crate::board::phone::Vignetting;
 use crate::capture::camera::Camera;
 use crate::capture::image_io::display_exposure;
 use crate::capture::image_io::ColorEncoding;
@@ -52,6 +54,11 @@ pub struct SynthArgs {
     /// `capture --lens calibrated` models it (K1 < 0: barrel).
     #[arg(long, value_parser = super::capture::parse_pair)]
     pub distortion: Option<[f64; 2]>,
+    /// Vignetting A,B of the phone's lens (`--format phone`, pinhole cameras): each photo's
+    /// radiance times `1 + A r^2 + B r^4` of the normalised image radius (A < 0: darker
+    /// corners), as `capture --vignetting calibrated` models it.
+    #[arg(long, value_parser = super::capture::parse_pair)]
+    pub vignetting: Option<[f64; 2]>,
     /// JPEG quality of `--format phone`.
     #[arg(long, default_value_t = 92)]
     pub jpeg_quality: u8,
@@ -107,34 +114,58 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
             *p = std::array::from_fn(|i| p[i] + q[i]);
         }
     }
-    if let Some(distortion) = args.distortion {
+    for (flag, given) in [
+        ("--distortion", args.distortion),
+        ("--vignetting", args.vignetting),
+    ] {
+        if given.is_none() {
+            continue;
+        }
         if args.format != SynthFormat::Phone {
             return Err(Error::argument(
-                "--distortion",
-                "distorts phone photos: give --format phone",
+                flag,
+                "is a phone lens's: give --format phone",
             ));
         }
-        for (photo, span) in capture.photos.iter().zip(&records.photos) {
-            let Camera::Pinhole(pinhole) = &photo.camera else {
-                return Err(Error::argument(
-                    "--distortion",
-                    "distorts the photos of pinhole cameras only",
-                ));
-            };
-            if pinhole.fx != pinhole.fy {
-                return Err(Error::argument(
-                    "--distortion",
-                    "distorts the photos of cameras with square pixels (fx = fy) only",
-                ));
+        for photo in &capture.photos {
+            match &photo.camera {
+                Camera::Pinhole(p) if p.fx == p.fy => {}
+                _ => {
+                    return Err(Error::argument(
+                        flag,
+                        "is a lens's of pinhole cameras with square pixels (fx = fy) only",
+                    ))
+                }
             }
+        }
+    }
+    for (photo, span) in capture.photos.iter().zip(&records.photos) {
+        let Camera::Pinhole(pinhole) = &photo.camera else {
+            continue;
+        };
+        let lens = Intrinsics {
+            focal: pinhole.fx,
+            cx: pinhole.cx,
+            cy: pinhole.cy,
+            distortion: args.distortion.unwrap_or([0.0; 2]),
+        };
+        if args.distortion.is_some() {
             let image = crate::board::phone::distorted(
                 &pixels[span.pixels()],
                 [span.width, span.height],
                 pinhole.fx,
                 [pinhole.cx, pinhole.cy],
-                distortion,
+                lens.distortion,
             );
             pixels[span.pixels()].copy_from_slice(&image);
+        }
+        if let Some(v) = args.vignetting {
+            let vignetting = Vignetting(v);
+            for (i, p) in pixels[span.pixels()].iter_mut().enumerate() {
+                let (c, r) = ((i % span.width) as f64 + 0.5, (i / span.width) as f64 + 0.5);
+                let factor = vignetting.factor(lens.radius2(c, r));
+                *p = p.map(|value| value * factor);
+            }
         }
     }
     if args.noise > 0.0 {

@@ -5,7 +5,7 @@ pose) against OpenCV on the same phone photos.
 | --- | --- | --- | --- |
 | tag corners | cv2.aruco (DICT_APRILTAG_36h11, AprilTag corner refinement) | every tag both find, every corner | 0.75 px worst, 0.25 px RMS, 0.1 px mean offset |
 | homography | cv2.findHomography (least squares, all points) on the tool's corners | the sample window's corners mapped by both | 0.05 px |
-| pose | cv2.solvePnP (iterative) on the tool's corners with the tool's K | rotation angle, translation | 0.05 degrees, 0.2% of distance |
+| pose | cv2.solvePnP (iterative) on the tool's corners with the tool's K, distortion and print scale | rotation angle, translation | 0.05 degrees, 0.2% of distance |
 
 The photos are `synth --board --format phone` renders (800x600 JPEG, 1% noise) of the
 bundled phone capture template. Conventions, measured on these photos: cv2.aruco's AprilTag
@@ -87,6 +87,13 @@ def test_tag_corners_match_opencv_aruco(captured):
     assert bias < CORNER_BIAS
 
 
+def printed(rep, c):
+    """A tag's corners as the tool found the board printed: scaled about the tag's centre."""
+    c = np.asarray(c, dtype=float)
+    centre = c.mean(axis=0)
+    return centre + rep["print"]["tag_scale"] * (c - centre)
+
+
 def test_homographies_match_cv2_find_homography(captured):
     _, rep, board_text = captured
     corners, board = board_corners(board_text)
@@ -94,7 +101,7 @@ def test_homographies_match_cv2_find_homography(captured):
     window = np.array([[[-w, h]], [[w, h]], [[w, -h]], [[-w, -h]]])
     worst = 0.0
     for photo in rep["photos"]:
-        src = np.concatenate([corners[t[0]] for t in photo["tags"]])
+        src = np.concatenate([printed(rep, corners[t[0]]) for t in photo["tags"]])
         dst = np.concatenate([np.array(t[1]) for t in photo["tags"]])
         theirs, _ = cv2.findHomography(src, dst, 0)
         ours = np.array(photo["homography"])
@@ -110,12 +117,15 @@ def test_poses_match_cv2_solve_pnp(captured):
     corners, _ = board_corners(board_text)
     f, (cx, cy) = rep["focal_px"], rep["principal_point"]
     k = np.array([[f, 0, cx], [0, f, cy], [0, 0, 1.0]])
+    # The lens and the print as the tool fitted them: OpenCV's first two radial coefficients
+    # are the tool's k1, k2; the tags' squares scaled about their centres.
+    distortion = np.array([*rep["distortion"], 0.0, 0.0])
     worst_angle, worst_t = 0.0, 0.0
     for photo in rep["photos"]:
-        obj = np.concatenate([np.c_[corners[t[0]], np.zeros(4)] for t in photo["tags"]])
+        obj = np.concatenate([np.c_[printed(rep, corners[t[0]]), np.zeros(4)] for t in photo["tags"]])
         # The tool's pixels have centres at half-integers; cv2 at integers.
         img = np.concatenate([np.array(t[1]) for t in photo["tags"]]) - 0.5
-        ok, rvec, tvec = cv2.solvePnP(obj, img, k - np.array([[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]]), None,
+        ok, rvec, tvec = cv2.solvePnP(obj, img, k - np.array([[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]]), distortion,
                                       flags=cv2.SOLVEPNP_ITERATIVE)
         assert ok
         r_ours, _ = cv2.Rodrigues(np.array(photo["rotation_vector"]))
