@@ -322,10 +322,12 @@ pub fn refine_pose(pose: Pose, k: &Intrinsics, points: &[Correspondence]) -> Pos
 }
 
 /// Standard deviations of the priors that hold a lens calibration near a centred pinhole: the
-/// principal point within 5% of the image's longer side, each distortion coefficient within
-/// 0.2, against a corner's 0.5 px.
-const PRINCIPAL_POINT_PRIOR: f64 = 0.05;
-const DISTORTION_PRIOR: f64 = 0.2;
+/// principal point within 1% of the image's longer side (a phone's is), each distortion
+/// coefficient within 0.1 (a phone's JPEG is mostly undistorted already), against a corner's
+/// 0.5 px. Weaker priors let views that cannot tell them apart (all straight down) move the
+/// principal point by a third of the image to fit the corners' noise.
+const PRINCIPAL_POINT_PRIOR: f64 = 0.01;
+const DISTORTION_PRIOR: f64 = 0.1;
 const CORNER_SIGMA_PX: f64 = 0.5;
 
 /// Bundle adjustment of one phone's photos of the board (Zhang 2000 sec. 3.3): the principal

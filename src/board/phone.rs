@@ -298,7 +298,8 @@ pub enum Lens {
     /// A pinhole at the image centre.
     Pinhole,
     /// Principal point and radial distortion `k1`, `k2` fitted over all photos
-    /// ([`calibrate_lens`]), from at least [`MIN_LENS_PHOTOS`] photos.
+    /// ([`calibrate_lens`]), from at least [`MIN_LENS_PHOTOS`] photos, and kept when they pay
+    /// for themselves in the corners' reprojection ([`pays_for_itself`]).
     Calibrated,
 }
 
@@ -321,6 +322,18 @@ pub struct LocateOptions {
     pub flash_offset: [f64; 3],
     pub lens: Lens,
     pub vignetting: VignettingModel,
+}
+
+/// Parameters a calibrated lens adds to a pinhole: principal point, k1, k2.
+const LENS_PARAMETERS: usize = 4;
+
+/// Whether `parameters` more that took a sum of `n` squared residuals from `before` to `after`
+/// pay for themselves by Schwarz's criterion: the decrease, in units of the residuals' variance
+/// after (`after / n`), must exceed `parameters ln n`. A fit to noise alone gains about
+/// `parameters`.
+pub fn pays_for_itself(before: f64, after: f64, n: usize, parameters: usize) -> bool {
+    let variance = after / n.max(1) as f64;
+    variance > 0.0 && (before - after) / variance > parameters as f64 * (n.max(2) as f64).ln()
 }
 
 /// Fewest photos a lens is calibrated from.
@@ -416,9 +429,23 @@ pub fn locate(board: &Board, photos: &mut [PhonePhoto], options: LocateOptions) 
     if lens == Lens::Calibrated && fitting.len() >= MIN_LENS_PHOTOS {
         let size = photos.first().map_or([0, 0], |p| [p.width, p.height]);
         let fixed_focal = focal_source == FocalSource::Given;
-        intrinsics = calibrate_lens(intrinsics, fixed_focal, size, &fitting).0;
-        for (_, pose, points) in &mut posed {
-            *pose = refine_pose(*pose, &intrinsics, points);
+        let (lens, poses) = calibrate_lens(intrinsics, fixed_focal, size, &fitting);
+        // Kept only when it explains the corners better than the pinhole by more than their
+        // noise would: a lens fitted to the noise would only move the cameras.
+        let squared = |k: &Intrinsics, poses: &mut dyn Iterator<Item = &Pose>| -> f64 {
+            poses
+                .zip(&fitting)
+                .map(|(pose, (_, points))| pose.rms_error(k, points).powi(2) * points.len() as f64)
+                .sum()
+        };
+        let before = squared(&intrinsics, &mut fitting.iter().map(|f| &f.0));
+        let after = squared(&lens, &mut poses.iter());
+        let residuals = 2 * fitting.iter().map(|f| f.1.len()).sum::<usize>();
+        if pays_for_itself(before, after, residuals, LENS_PARAMETERS) {
+            intrinsics = lens;
+            for (_, pose, points) in &mut posed {
+                *pose = refine_pose(*pose, &intrinsics, points);
+            }
         }
     }
     let posed: Vec<(usize, Pose, f64)> = posed
@@ -586,8 +613,9 @@ const PAPER_READ_NOISE: f64 = 0.01;
 /// The vignetting the paper of several photos shows: every photo's paper is `v_c = s_c
 /// falloff V(r^2)`, with its own `s_c` (its flash, exposure and white balance, fitted in
 /// closed form) and `V` shared ([`Vignetting`]), fitted by Levenberg-Marquardt on the reads'
-/// relative residuals. The flash's falloff across the board and the lens's across the image
-/// differ as soon as the board is seen at different places in the frame.
+/// relative residuals, and kept when it pays for itself ([`pays_for_itself`]). The
+/// flash's falloff across the board and the lens's across the image differ as soon as the
+/// board is seen at different places in the frame.
 pub fn fit_vignetting(photos: &[Vec<PaperRead>]) -> Vignetting {
     let residuals = |p: &[f64]| -> Option<Vec<f64>> {
         let v = Vignetting([p[0], p[1]]);
@@ -612,7 +640,15 @@ pub fn fit_vignetting(photos: &[Vec<PaperRead>]) -> Vignetting {
         Some(r)
     };
     let p = super::geometry::levenberg_marquardt(vec![0.0, 0.0], &[1e-6, 1e-6], residuals);
-    Vignetting([p[0], p[1]])
+    // Kept only when it explains the paper better than none by more than its noise would: a
+    // vignetting fitted to the noise would only bend the photos where no paper was seen.
+    let cost = |p: &[f64]| residuals(p).map_or(f64::INFINITY, |r| r.iter().map(|v| v * v).sum());
+    let reads = 3 * photos.iter().map(Vec::len).sum::<usize>();
+    if pays_for_itself(cost(&[0.0, 0.0]), cost(&p), reads, 2) {
+        Vignetting([p[0], p[1]])
+    } else {
+        Vignetting::NONE
+    }
 }
 
 /// The flash as the board's white paper shows it.

@@ -384,3 +384,111 @@ fn an_over_exposed_paper_is_checked_on_its_unclipped_points() {
         "{why}"
     );
 }
+
+#[test]
+fn bundle_adjustment_recovers_a_distorted_off_centre_lens() {
+    let b = board();
+    let truth = Intrinsics {
+        focal: 1500.0,
+        cx: 979.0,
+        cy: 706.0,
+        distortion: [-0.05, 0.01],
+    };
+    let eyes = [
+        [5.0, -8.0, 30.0],
+        [-9.0, 2.0, 27.0],
+        [1.0, 10.0, 32.0],
+        [7.0, 7.0, 29.0],
+        [-6.0, -6.0, 26.0],
+        [0.0, 0.0, 24.0],
+    ];
+    let poses: Vec<Pose> = eyes
+        .iter()
+        .enumerate()
+        .map(|(i, &e)| looking_at(e, 0.5 * i as f64))
+        .collect();
+    // Corners good to +-0.2 px, as the detector gives them.
+    let sets: Vec<_> = poses
+        .iter()
+        .enumerate()
+        .map(|(i, p)| correspondences(&b, &truth, p, 0.2, 10 + i as u64))
+        .collect();
+    // What capture starts from: a pinhole at the image centre with the board's focal length.
+    let hs: Vec<_> = sets.iter().map(|s| homography(s).unwrap()).collect();
+    let focal = focal_from_homographies(&hs, 960.0, 720.0).unwrap();
+    let start = Intrinsics::pinhole(focal, 960.0, 720.0);
+    let posed: Vec<Pose> = hs
+        .iter()
+        .zip(&sets)
+        .map(|(h, s)| refine_pose(pose_from_homography(h, &start).unwrap(), &start, s))
+        .collect();
+    let pinhole_rms = posed
+        .iter()
+        .zip(&sets)
+        .map(|(p, s)| p.rms_error(&start, s))
+        .fold(0.0, f64::max);
+    let photos: Vec<(Pose, &[Correspondence])> = posed
+        .iter()
+        .zip(&sets)
+        .map(|(p, s)| (*p, s.as_slice()))
+        .collect();
+    let (k, refined) = calibrate_lens(start, false, [1920, 1440], &photos);
+    assert!(
+        (k.cx - truth.cx).abs() < 2.0 && (k.cy - truth.cy).abs() < 2.0,
+        "principal point {}, {}",
+        k.cx,
+        k.cy
+    );
+    assert!(
+        (k.focal / truth.focal - 1.0).abs() < 0.005,
+        "focal {}",
+        k.focal
+    );
+    // The distortion curve where the corners are (r^2 up to about 0.15 here).
+    let curve = |k: &Intrinsics, r2: f64| r2 * (k.distortion[0] + k.distortion[1] * r2);
+    for r2 in [0.02, 0.08, 0.15] {
+        let (got, want) = (curve(&k, r2), curve(&truth, r2));
+        assert!(
+            (got - want).abs() < 0.002,
+            "distortion at r^2 {r2}: {got} vs {want}"
+        );
+    }
+    // Every photo's corners then reproject to their noise (uniform +-0.2 px: 0.16 px RMS).
+    for (pose, set) in refined.iter().zip(&sets) {
+        let rms = pose.rms_error(&k, set);
+        assert!(
+            rms < 0.25 && rms < pinhole_rms,
+            "rms {rms} (pinhole {pinhole_rms})"
+        );
+    }
+}
+
+#[test]
+fn a_lens_the_views_cannot_determine_stays_near_a_centred_pinhole() {
+    // Four photos straight down from one height: the principal point trades against the
+    // translation and the distortion against nothing the corners show; the priors hold them.
+    let b = board();
+    let truth = Intrinsics::pinhole(1200.0, 800.0, 600.0);
+    let photos: Vec<(Pose, Vec<Correspondence>)> = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]]
+        .iter()
+        .enumerate()
+        .map(|(i, [x, y])| {
+            let pose = looking_at([*x, *y, 30.0], 0.0);
+            (pose, correspondences(&b, &truth, &pose, 0.2, 40 + i as u64))
+        })
+        .collect();
+    let views: Vec<(Pose, &[Correspondence])> =
+        photos.iter().map(|(p, s)| (*p, s.as_slice())).collect();
+    let (k, poses) = calibrate_lens(truth, true, [1600, 1200], &views);
+    assert_eq!(k.focal, truth.focal);
+    assert!(k.cx.is_finite() && k.cy.is_finite() && poses.iter().all(|p| p.center().z > 0.0));
+    assert!(
+        (k.cx - 800.0).abs() < 0.05 * 1600.0 && (k.cy - 600.0).abs() < 0.05 * 1600.0,
+        "{k:?}"
+    );
+    assert!(
+        k.distortion.iter().all(|d| d.abs() < 0.2),
+        "{:?}",
+        k.distortion
+    );
+}
