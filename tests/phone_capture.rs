@@ -75,30 +75,11 @@ fn jpegs(folder: &Path, n: usize) -> Vec<String> {
 #[test]
 fn phone_photos_become_a_photo_set_that_fits_like_the_ideal_one() {
     let dir = tempfile::tempdir().unwrap();
-    let (board, photos, set, ideal) = (
-        dir.path().join("board"),
-        dir.path().join("photos"),
-        dir.path().join("set"),
-        dir.path().join("ideal"),
-    );
-    run_ok(&["board", "-o", board.to_str().unwrap(), "--dpi", "100"]);
+    let (set, ideal) = (dir.path().join("set"), dir.path().join("ideal"));
+    let (board_toml, photos) = phone_photos(dir.path(), &repo(MATERIAL), &repo(PHONE), &[]);
     assert_eq!(
-        folder_entries(&board),
+        folder_entries(board_toml.parent().unwrap()),
         ["board.png", "board.svg", "board.toml"]
-    );
-    let board_toml = board.join("board.toml");
-    synth(
-        &repo(MATERIAL),
-        &repo(PHONE),
-        &photos,
-        &[
-            "--board",
-            board_toml.to_str().unwrap(),
-            "--format",
-            "phone",
-            "--noise",
-            "0.01",
-        ],
     );
     let truth = cameras(&photos.join("capture.toml"));
     let gain = truth[0].1;
@@ -196,23 +177,18 @@ const PAINT: &str = r#"{"model": "single", "ndf": "ggx", "height": "correlated",
   "alpha": [0.25, 0.25], "fresnel": {"kind": "schlick", "f0": [0.04, 0.04, 0.04]},
   "diffuse": [0.5, 0.25, 0.1]}"#;
 
-/// Phone photos (`synth --format phone`, 1% noise, more `synth` options `extra`) of [`PAINT`]
-/// in a printed board, taken as the capture template `template` says, into `dir`: the board
-/// file and the photos' folder.
-fn paint_phone_photos(
+/// A printed board (`dir/board`) and phone photos of `material` in it (`dir/photos`: `synth
+/// --format phone`, 1% noise, more `synth` options `extra`) taken as the capture template
+/// `template` says: the board file and the photos' folder.
+fn phone_photos(
     dir: &Path,
-    template: &str,
+    material: &Path,
+    template: &Path,
     extra: &[&str],
 ) -> (std::path::PathBuf, std::path::PathBuf) {
     let (board, photos) = (dir.join("board"), dir.join("photos"));
     run_ok(&["board", "-o", board.to_str().unwrap(), "--dpi", "50"]);
     let board_toml = board.join("board.toml");
-    let (paint, manifest) = (
-        dir.join("paint.material.json"),
-        dir.join("phone.capture.toml"),
-    );
-    std::fs::write(&paint, PAINT).unwrap();
-    std::fs::write(&manifest, template).unwrap();
     let mut options = vec![
         "--board",
         board_toml.to_str().unwrap(),
@@ -222,8 +198,23 @@ fn paint_phone_photos(
         "0.01",
     ];
     options.extend_from_slice(extra);
-    synth(&paint, &manifest, &photos, &options);
+    synth(material, template, &photos, &options);
     (board_toml, photos)
+}
+
+/// [`phone_photos`] of [`PAINT`] taken as the template text `template` says.
+fn paint_phone_photos(
+    dir: &Path,
+    template: &str,
+    extra: &[&str],
+) -> (std::path::PathBuf, std::path::PathBuf) {
+    let (paint, manifest) = (
+        dir.join("paint.material.json"),
+        dir.join("phone.capture.toml"),
+    );
+    std::fs::write(&paint, PAINT).unwrap();
+    std::fs::write(&manifest, template).unwrap();
+    phone_photos(dir, &paint, &manifest, extra)
 }
 
 /// The nine-photo phone template with each photo's own auto-exposure (0.85-1.15), which the

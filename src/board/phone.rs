@@ -105,8 +105,7 @@ impl PhonePhoto {
     pub fn devignette(&mut self, k: &Intrinsics, v: Vignetting) {
         let width = self.width;
         for (i, p) in self.linear.iter_mut().enumerate() {
-            let (c, r) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
-            let factor = v.factor(k.radius2(c, r)).max(1e-3) as f32;
+            let factor = v.at_pixel(k, i, width).max(1e-3) as f32;
             *p = p.map(|value| value / factor);
         }
     }
@@ -603,6 +602,12 @@ impl Vignetting {
     pub fn factor(&self, radius2: f64) -> f64 {
         1.0 + radius2 * (self.0[0] + self.0[1] * radius2)
     }
+
+    /// The factor at the centre of pixel `i` of an image `width` pixels wide, seen by lens `k`.
+    pub fn at_pixel(&self, k: &Intrinsics, i: usize, width: usize) -> f64 {
+        let (c, r) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
+        self.factor(k.radius2(c, r))
+    }
 }
 
 /// Standard deviation of the prior on each vignetting coefficient, against a paper read's
@@ -778,28 +783,39 @@ pub fn rectify(
     out
 }
 
-/// Bilinear read of the linear photo at image position `q` (pixel centres at half-integers),
-/// and whether one of the four pixels read is clipped; `None` outside the photo.
-fn bilinear(photo: &PhonePhoto, q: [f64; 2]) -> Option<([f64; 3], bool)> {
+/// The four pixels (row-major indices of a `size` image) and weights of a bilinear read at image
+/// position `q` (pixel centres at half-integers); `None` outside the pixel centres' hull.
+fn bilinear_taps(size: [usize; 2], q: [f64; 2]) -> Option<[(usize, f64); 4]> {
+    let [w, h] = size;
     let (x, y) = (q[0] - 0.5, q[1] - 0.5);
-    if x < 0.0 || y < 0.0 || x > (photo.width - 1) as f64 || y > (photo.height - 1) as f64 {
+    if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64) {
         return None;
     }
     let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-    let (x1, y1) = (
-        (x0 + 1).min(photo.width - 1),
-        (y0 + 1).min(photo.height - 1),
-    );
+    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
     let (fx, fy) = (x - x0 as f64, y - y0 as f64);
-    let at = |xx: usize, yy: usize| photo.linear[yy * photo.width + xx].map(f64::from);
-    let (a, b, c, d) = (at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1));
-    let clipped = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)]
-        .iter()
-        .any(|&(xx, yy)| photo.clipped[yy * photo.width + xx]);
-    let value = std::array::from_fn(|i| {
-        (a[i] * (1.0 - fx) + b[i] * fx) * (1.0 - fy) + (c[i] * (1.0 - fx) + d[i] * fx) * fy
-    });
-    Some((value, clipped))
+    Some([
+        (y0 * w + x0, (1.0 - fx) * (1.0 - fy)),
+        (y0 * w + x1, fx * (1.0 - fy)),
+        (y1 * w + x0, (1.0 - fx) * fy),
+        (y1 * w + x1, fx * fy),
+    ])
+}
+
+/// The bilinear read of `taps` of an RGB image whose pixel `i` is `at(i)`.
+fn read(taps: &[(usize, f64); 4], at: impl Fn(usize) -> [f64; 3]) -> [f64; 3] {
+    taps.iter().fold([0.0; 3], |sum, &(i, weight)| {
+        let v = at(i);
+        std::array::from_fn(|c| sum[c] + weight * v[c])
+    })
+}
+
+/// Bilinear read of the linear photo at image position `q`, and whether one of the four pixels
+/// read is clipped; `None` outside the photo.
+fn bilinear(photo: &PhonePhoto, q: [f64; 2]) -> Option<([f64; 3], bool)> {
+    let taps = bilinear_taps([photo.width, photo.height], q)?;
+    let value = read(&taps, |i| photo.linear[i].map(f64::from));
+    Some((value, taps.iter().any(|&(i, _)| photo.clipped[i])))
 }
 
 /// What a lens with radial distortion `[k1, k2]` ([`Intrinsics::pixel`]) makes of a pinhole
@@ -815,7 +831,6 @@ pub fn distorted(
     distortion: [f64; 2],
 ) -> Vec<[f64; 3]> {
     let [w, h] = size;
-    let at = |x: usize, y: usize| rgb[y * w + x];
     (0..w * h)
         .map(|i| {
             let xd = ((i % w) as f64 + 0.5 - principal[0]) / focal;
@@ -826,20 +841,8 @@ pub fn distorted(
                 let s = 1.0 + r2 * (distortion[0] + distortion[1] * r2);
                 (x, y) = (xd / s, yd / s);
             }
-            let (u, v) = (
-                x * focal + principal[0] - 0.5,
-                y * focal + principal[1] - 0.5,
-            );
-            if !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f64 && v <= (h - 1) as f64) {
-                return [0.0; 3];
-            }
-            let (x0, y0) = (u.floor() as usize, v.floor() as usize);
-            let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-            let (fx, fy) = (u - x0 as f64, v - y0 as f64);
-            let (a, b, c, d) = (at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1));
-            std::array::from_fn(|k| {
-                (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
-            })
+            let q = [x * focal + principal[0], y * focal + principal[1]];
+            bilinear_taps(size, q).map_or([0.0; 3], |taps| read(&taps, |j| rgb[j]))
         })
         .collect()
 }

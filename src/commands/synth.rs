@@ -162,8 +162,7 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
         if let Some(v) = args.vignetting {
             let vignetting = Vignetting(v);
             for (i, p) in pixels[span.pixels()].iter_mut().enumerate() {
-                let (c, r) = ((i % span.width) as f64 + 0.5, (i / span.width) as f64 + 0.5);
-                let factor = vignetting.factor(lens.radius2(c, r));
+                let factor = vignetting.at_pixel(&lens, i, span.width);
                 *p = p.map(|value| value * factor);
             }
         }
